@@ -1,0 +1,76 @@
+"""Conventions every stage program shares: the user-facing error, exit codes,
+the ``--device`` flag and logging.
+
+A program's ``main`` builds its parser with :func:`stage_parser`, then hands its
+body to :func:`run_main`, which turns an :class:`InputError` into one readable
+paragraph on stderr and exit code 2.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+from typing import Callable, Optional, Sequence
+
+EXIT_INPUT_ERROR = 2
+
+log = logging.getLogger("physmotion")
+
+
+class InputError(Exception):
+    """Bad input from the user: names the file, the field and the fix.
+
+    Args:
+        file: the file at fault (scene.yaml, an image, an artifact).
+        field: the key or dataset at fault, e.g. ``objects[0].material.poisson_ratio``;
+            None when the file as a whole is at fault.
+        problem: what is wrong, one sentence.
+        fix: what the user should do, one sentence.
+    """
+
+    def __init__(self, file: Path | str, field: Optional[str], problem: str, fix: str):
+        self.file, self.field, self.problem, self.fix = str(file), field, problem, fix
+        super().__init__(self.paragraph())
+
+    def paragraph(self) -> str:
+        where = f"{self.file}" + (f", field '{self.field}'" if self.field else "")
+        return f"error in {where}: {self.problem.rstrip('.')}. Fix: {self.fix.rstrip('.')}."
+
+
+def stage_parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """An argument parser with the flags every stage program takes."""
+    parser = argparse.ArgumentParser(
+        prog=prog, description=description, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--device", choices=("cpu", "cuda", "auto"), default="auto",
+                        help="where kernels run; auto picks cuda when a GPU is visible (default: auto)")
+    parser.add_argument("-v", "--verbose", action="store_true", help="debug logging")
+    return parser
+
+
+def resolve_device(choice: str) -> str:
+    """Map ``cpu|cuda|auto`` to a device name torch and Warp both accept ("cpu" or "cuda:0")."""
+    import torch
+
+    if choice == "cpu":
+        return "cpu"
+    if torch.cuda.is_available():
+        return "cuda:0"
+    if choice == "cuda":
+        raise InputError("--device", None, "cuda was asked for but no CUDA GPU is visible",
+                         "run with --device cpu or auto, or on a machine with an NVIDIA GPU")
+    return "cpu"
+
+
+def run_main(body: Callable[[argparse.Namespace], None], parser: argparse.ArgumentParser,
+             argv: Optional[Sequence[str]] = None) -> None:
+    """Parse arguments, set up logging, run ``body`` and exit with the right code."""
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
+                        format=f"%(asctime)s {parser.prog} %(levelname)s %(message)s", datefmt="%H:%M:%S")
+    try:
+        body(args)
+    except InputError as err:
+        print(f"{parser.prog}: {err.paragraph()}", file=sys.stderr)
+        sys.exit(EXIT_INPUT_ERROR)

@@ -1,0 +1,361 @@
+"""scene.yaml: the user-facing description of one scene.
+
+Units: metres, seconds, kilograms, pascals, degrees. Regions live in an
+object's own normalised box, [0,1]^3 over its bounding box at rest (x right,
+y down, z away from the camera). Every path is relative to the scene folder.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+from pathlib import Path
+from typing import Annotated, Any, List, Literal, Optional, Tuple, Union
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator, PrivateAttr
+
+from .diffusion import DiffusionSettings
+from .materials import Jelly, Material
+from .program import InputError
+
+Vec3 = Tuple[float, float, float]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class CameraConfig(_Strict):
+    fov_deg: float = Field(40.0, gt=1, lt=179, description="vertical field of view in degrees")
+    pitch_deg: float = Field(0.0, ge=-89, le=89,
+                             description="camera tilt down from horizontal in degrees; turns the default gravity")
+
+
+class ObjectConfig(_Strict):
+    mask: Optional[Path] = Field(None, description="mask image (non-zero = object); else box; neither: image alpha, else GrabCut")
+    box: Optional[Tuple[float, float, float, float]] = Field(None, description="[x0, y0, x1, y1] in pixels, refined by GrabCut")
+    size_m: float = Field(0.25, gt=0, description="largest extent of the object in metres")
+    material: Material = Field(default_factory=Jelly, description="material preset and its keys")
+
+    @model_validator(mode="after")
+    def _one_segmentation(self) -> "ObjectConfig":
+        if self.mask is not None and self.box is not None:
+            raise ValueError("give either mask or box, not both")
+        if self.box is not None and not (self.box[0] < self.box[2] and self.box[1] < self.box[3]):
+            raise ValueError("box must be [x0, y0, x1, y1] with x0 < x1 and y0 < y1")
+        return self
+
+
+class ExtraView(_Strict):
+    image: Path = Field(description="another view of the object (e.g. from a multi-view diffusion model)")
+    azimuth_deg: float = Field(description="azimuth of that view about the object's vertical axis, degrees")
+
+
+class ReconstructConfig(_Strict):
+    resolution: int = Field(256, ge=32, le=2048, description="longest image side used by the optimisation, pixels")
+    iterations: int = Field(600, ge=0, description="optimisation iterations (paper: 3000)")
+    init_ply: Optional[Path] = Field(None, description="3DGS PLY from another tool as the initial Gaussians")
+    extra_views: List[ExtraView] = Field(default_factory=list, description="extra views for the hard-depth loss (Eq. 9)")
+
+
+class GroundConfig(_Strict):
+    enabled: bool = True
+    type: Literal["sticky", "slip", "friction"] = Field("friction", description="boundary condition on the ground")
+    friction: float = Field(0.3, ge=0, description="Coulomb friction coefficient (type: friction)")
+
+
+Region = Union[Literal["all"], "BoxRegion", "SphereRegion"]
+
+
+class BoxRegion(_Strict):
+    box: Tuple[float, float, float, float, float, float] = Field(description="[x0, y0, z0, x1, y1, z1] in [0,1]^3")
+
+    @field_validator("box")
+    @classmethod
+    def _ordered(cls, b):
+        if not all(b[i] < b[i + 3] for i in range(3)):
+            raise ValueError("box must be [x0, y0, z0, x1, y1, z1] with each min below its max")
+        return b
+
+
+class SphereRegion(_Strict):
+    sphere: Tuple[float, float, float, float] = Field(description="[cx, cy, cz, radius] in the normalised box")
+
+    @field_validator("sphere")
+    @classmethod
+    def _positive_radius(cls, s):
+        if s[3] <= 0:
+            raise ValueError("sphere radius must be positive")
+        return s
+
+
+class _Condition(_Strict):
+    object: int = Field(0, ge=0, description="index into objects")
+    region: Region = Field("all", description="'all', {box: [...]} or {sphere: [...]}")
+
+
+class _Windowed(_Condition):
+    start_s: float = Field(0.0, ge=0, description="start of the window in seconds")
+    end_s: Optional[float] = Field(None, description="end of the window in seconds; null: until the end")
+
+    @model_validator(mode="after")
+    def _ordered(self):
+        if self.end_s is not None and self.end_s <= self.start_s:
+            raise ValueError("end_s must be after start_s")
+        return self
+
+
+class Impulse(_Condition):
+    type: Literal["impulse"]
+    velocity: Vec3 = Field(description="velocity change in m/s, added once at start_s")
+    start_s: float = Field(0.0, ge=0, description="time of the impulse in seconds")
+
+
+class Velocity(_Windowed):
+    type: Literal["velocity"]
+    velocity: Vec3 = Field(description="prescribed velocity of the region in m/s during the window")
+
+
+class Force(_Windowed):
+    type: Literal["force"]
+    force: Vec3 = Field(description="total force in newtons, shared by mass over the region")
+
+
+class Torque(_Windowed):
+    type: Literal["torque"]
+    torque: Vec3 = Field(description="torque in N m about the region's centre of mass")
+
+
+class Fixed(_Windowed):
+    type: Literal["fixed"]
+
+
+Condition = Annotated[Union[Impulse, Velocity, Force, Torque, Fixed], Field(discriminator="type")]
+
+
+class PhysicsConfig(_Strict):
+    duration_s: float = Field(1.0, gt=0, description="length of the video in seconds")
+    fps: float = Field(24.0, gt=0, le=240, description="frames per second")
+    gravity: Optional[Vec3] = Field(None, description="m/s^2; null: 9.81 down in the picture, turned by camera.pitch_deg")
+    grid: int = Field(64, ge=8, le=512, description="grid cells along the longest side of the domain")
+    particles_per_cell: int = Field(8, ge=1, le=64, description="interior fill density")
+    ground: GroundConfig = GroundConfig()
+    walls: bool = Field(False, description="close the domain with slip walls")
+    dt: Optional[float] = Field(None, gt=0, description="substep in seconds; null: from the CFL bound")
+    conditions: List[Condition] = Field(default_factory=list, description="impulses, forces, torques, fixed regions")
+
+
+class RenderConfig(_Strict):
+    width: int = Field(512, ge=16, le=4096, description="video width in pixels (capped at the photo's, rounded even)")
+
+
+class EnhanceConfig(_Strict):
+    backend: Literal["flow", "diffusion"] = Field("flow", description="flow: photo pixels moved by the simulation")
+    confidence_threshold: float = Field(0.5, ge=0, le=1,
+                                        description="flow: trust the photograph where source_confidence is above this")
+    diffusion: DiffusionSettings = DiffusionSettings()
+
+
+class Scene(_Strict):
+    image: Path = Field(description="the photograph, relative to the scene folder")
+    prompt: str = Field("", description="text prompt for the diffusion backend")
+    camera: CameraConfig = CameraConfig()
+    objects: List[ObjectConfig] = Field(default_factory=lambda: [ObjectConfig()], min_length=1)
+    reconstruct: ReconstructConfig = ReconstructConfig()
+    physics: PhysicsConfig = PhysicsConfig()
+    render: RenderConfig = RenderConfig()
+    enhance: EnhanceConfig = EnhanceConfig()
+
+    @model_validator(mode="after")
+    def _conditions_name_objects(self) -> "Scene":
+        for i, c in enumerate(self.physics.conditions):
+            if c.object >= len(self.objects):
+                raise ValueError(f"physics.conditions[{i}].object is {c.object} but the scene has "
+                                 f"{len(self.objects)} object(s), numbered from 0")
+        return self
+
+    # Filled in by load_scene; not part of the YAML.
+    _file: Path = PrivateAttr(default=Path("scene.yaml"))
+
+    @property
+    def file(self) -> Path:
+        """The scene.yaml this scene was loaded from."""
+        return self._file
+
+    @property
+    def folder(self) -> Path:
+        return self._file.parent
+
+
+# ---------------------------------------------------------------------------
+# Loading
+
+class _Yaml12Loader(yaml.SafeLoader):
+    """PyYAML speaks YAML 1.1, where `2e5` is a string; YAML 1.2 makes it a float."""
+
+
+_Yaml12Loader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?$|^[-+]?\.(?:inf|Inf|INF)$|^\.(?:nan|NaN|NAN)$"),
+    list("-+0123456789."),
+)  # appended after PyYAML's own int and float resolvers, so `2` stays an int
+
+
+def _loc_to_field(loc: Tuple[Any, ...]) -> str:
+    """('objects', 0, 'material', 'jelly', 'density') -> 'objects[0].material.density'."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        elif part in ("jelly", "metal", "sand", "plasticine", "foam", "snow", "rigid", "fracture",
+                      "impulse", "velocity", "force", "torque", "fixed") and out.endswith(("material", "]")):
+            continue  # discriminated-union tags pydantic puts into the path
+        elif isinstance(part, str) and (part.startswith(("literal[", "BoxRegion", "SphereRegion"))):
+            continue
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def _explain(err: dict) -> Tuple[str, str]:
+    """A problem sentence and a fix sentence for one pydantic error."""
+    kind, msg = err["type"], err["msg"]
+    if kind == "extra_forbidden":
+        return "unknown key", "remove it or check its spelling against docs/scene.schema.json"
+    if kind == "missing":
+        return "required key is missing", "add it (see docs/scene.schema.json)"
+    if kind == "union_tag_invalid":
+        return msg, "use one of the listed values"
+    return msg, "see docs/scene.schema.json for the allowed values and units"
+
+
+def _resolve_paths(scene: Scene, folder: Path) -> None:
+    """Make every path absolute (relative to the scene folder) and check that it exists."""
+    def check(path: Path, field: str) -> Path:
+        full = path if path.is_absolute() else (folder / path)
+        if not full.is_file():
+            raise InputError(folder / "scene.yaml", field, f"file '{path}' does not exist",
+                             f"put the file in {folder} or correct the path")
+        return full.resolve()
+
+    scene.image = check(scene.image, "image")
+    for k, obj in enumerate(scene.objects):
+        if obj.mask is not None:
+            obj.mask = check(obj.mask, f"objects[{k}].mask")
+    if scene.reconstruct.init_ply is not None:
+        scene.reconstruct.init_ply = check(scene.reconstruct.init_ply, "reconstruct.init_ply")
+    for i, view in enumerate(scene.reconstruct.extra_views):
+        view.image = check(view.image, f"reconstruct.extra_views[{i}].image")
+
+
+def _check_images(scene: Scene) -> None:
+    """The photograph and masks must be readable, masks the photo's size and not empty, boxes inside."""
+    import cv2
+    import numpy as np
+
+    yaml_file = scene.file
+    photo = cv2.imread(str(scene.image), cv2.IMREAD_UNCHANGED)
+    if photo is None:
+        raise InputError(scene.image, None, "cannot read this file as an image",
+                         "give a PNG or JPEG photograph in 'image' of " + str(yaml_file))
+    h, w = photo.shape[:2]
+    for k, obj in enumerate(scene.objects):
+        if obj.box is not None:
+            x0, y0, x1, y1 = obj.box
+            if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+                raise InputError(yaml_file, f"objects[{k}].box", f"box {list(obj.box)} reaches outside the "
+                                 f"{w}x{h} image", f"keep 0 <= x <= {w} and 0 <= y <= {h}")
+        if obj.mask is not None:
+            mask = cv2.imread(str(obj.mask), cv2.IMREAD_UNCHANGED)
+            if mask is None:
+                raise InputError(obj.mask, None, "cannot read this file as an image",
+                                 f"give a PNG mask in objects[{k}].mask of {yaml_file}")
+            if mask.shape[:2] != (h, w):
+                raise InputError(obj.mask, f"objects[{k}].mask", f"mask is {mask.shape[1]}x{mask.shape[0]} but the "
+                                 f"photograph is {w}x{h}", "make the mask exactly the photograph's size")
+            if not np.any(mask):
+                raise InputError(obj.mask, f"objects[{k}].mask", "mask is empty (all zero)",
+                                 "paint the object non-zero in the mask, or use a box instead")
+
+
+def load_scene(path: Path | str, check_files: bool = True) -> Scene:
+    """Read and validate a scene.yaml.
+
+    Args:
+        path: the scene.yaml, or its folder.
+        check_files: also check that every referenced file exists and the images are consistent.
+
+    Raises:
+        InputError: naming the file, the field and the fix.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "scene.yaml"
+    if not path.is_file():
+        raise InputError(path, None, "scene file does not exist", "give the path of a scene.yaml (or its folder)")
+    try:
+        raw = yaml.load(path.read_text(), Loader=_Yaml12Loader)
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        raise InputError(path, None, f"YAML syntax error{where}: {getattr(err, 'problem', err)}",
+                         "fix the YAML there (indentation, a missing colon or an unclosed bracket)") from None
+    if not isinstance(raw, dict):
+        raise InputError(path, None, "the file is not a YAML mapping", "start from scenes/*/scene.yaml")
+    try:
+        scene = Scene.model_validate(raw)
+    except ValidationError as err:
+        first = err.errors()[0]
+        problem, fix = _explain(first)
+        more = f" ({err.error_count() - 1} more problem(s) after this one)" if err.error_count() > 1 else ""
+        raise InputError(path, _loc_to_field(first["loc"]), problem + more, fix) from None
+    scene._file = path.resolve()
+    if check_files:
+        _resolve_paths(scene, scene.folder)
+        _check_images(scene)
+    return scene
+
+
+# ---------------------------------------------------------------------------
+# What each stage reads, and its hash
+
+def stage_keys(scene: Scene, stage: str) -> dict:
+    """The scene keys a stage reads (DESIGN.md); a rule reruns when, and only when, these change.
+
+    simulate also reads camera.pitch_deg (it turns the default gravity); a change there
+    reruns reconstruct anyway.
+    """
+    data = _relative_paths(scene.model_dump(mode="json"), str(scene.folder))
+    if stage == "reconstruct":
+        objs = [{k: o[k] for k in ("mask", "box", "size_m")} for o in data["objects"]]
+        return {"image": data["image"], "camera": data["camera"], "objects": objs, "reconstruct": data["reconstruct"]}
+    if stage == "simulate":
+        return {"materials": [o["material"] for o in data["objects"]], "physics": data["physics"],
+                "pitch_deg": data["camera"]["pitch_deg"]}
+    if stage == "render":
+        return {"render": data["render"]}
+    if stage in ("lora", "invert", "enhance"):
+        return {"prompt": data["prompt"], "enhance": data["enhance"]}
+    raise ValueError(f"unknown stage {stage!r}")
+
+
+def _relative_paths(value: Any, folder: str) -> Any:
+    """Paths inside the scene folder written relative to it, so hashes do not depend on the checkout's location."""
+    if isinstance(value, dict):
+        return {k: _relative_paths(v, folder) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_relative_paths(v, folder) for v in value]
+    if isinstance(value, str) and value.startswith(folder + "/"):
+        return value[len(folder) + 1:]
+    return value
+
+
+def config_hash(keys: dict) -> str:
+    """sha256 of the canonical JSON of ``keys`` (paths as given, sorted keys)."""
+    return hashlib.sha256(json.dumps(keys, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def scene_json_schema() -> dict:
+    """JSON Schema of scene.yaml, for editors and docs."""
+    return Scene.model_json_schema()
