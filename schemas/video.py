@@ -1,0 +1,58 @@
+"""The video convention (DESIGN.md): H.264 through PyAV, yuv420p, even width and height.
+
+OpenCV's wheels cannot write H.264, so every program writes video here.
+"""
+from __future__ import annotations
+
+import os
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+
+def even_size(width: int, height: int) -> tuple[int, int]:
+    """Round a frame size down to even numbers (yuv420p needs them), at least 2x2."""
+    return max(2, width - width % 2), max(2, height - height % 2)
+
+
+def write_video(path: Path | str, frames: np.ndarray, fps: float, crf: int = 18) -> Path:
+    """Write RGB frames to an H.264 MP4, atomically (temp file beside it, renamed when complete).
+
+    Args:
+        frames: (T, h, w, 3) uint8 RGB; odd sizes are cropped by one pixel to even.
+        fps: frames per second.
+        crf: x264 constant rate factor (lower is better; 18 is visually lossless).
+    """
+    import av
+
+    path = Path(path)
+    frames = np.asarray(frames)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
+        raise ValueError(f"frames must be (T, h, w, 3) uint8, got {frames.shape} {frames.dtype}")
+    width, height = even_size(frames.shape[2], frames.shape[1])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
+    try:
+        with av.open(str(tmp), mode="w", format="mp4") as container:
+            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+            stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+            stream.options = {"crf": str(crf)}
+            for rgb in frames[:, :height, :width]:
+                container.mux(stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")))
+            container.mux(stream.encode())
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_video(path: Path | str) -> tuple[np.ndarray, float, str]:
+    """Decode a video: (T, h, w, 3) uint8 RGB frames, fps and the codec name."""
+    import av
+
+    with av.open(str(path)) as container:
+        stream = container.streams.video[0]
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
+        return np.stack(frames), float(stream.average_rate), stream.codec_context.name

@@ -1,0 +1,83 @@
+def lora_dir(wildcards):
+    """The LoRA folder when the scene asks for personalisation, else nothing."""
+    s = scene(wildcards.scene)
+    wanted = uses_diffusion(wildcards.scene) and s.enhance.diffusion.lora.enabled
+    return [str(RESULTS / wildcards.scene / "lora")] if wanted else []
+
+
+def artifacts_and_lora(*names, latents=False):
+    """Input function: this scene's named artifacts (+ latents.h5 when diffusion), + the LoRA folder when enabled."""
+    def inputs(wildcards):
+        wanted = list(names) + (["latents"] if latents and uses_diffusion(wildcards.scene) else [])
+        files = {name: str(RESULTS / wildcards.scene / f"{name}.h5") for name in wanted}
+        files.update({"lora": folder for folder in lora_dir(wildcards)})
+        return files
+    return inputs
+
+
+def optional_flag(flag, files):
+    """' --flag path' for a present optional input, '' otherwise."""
+    return lambda wildcards, input: f" {flag} {input[files]}" if files in input.keys() else ""
+
+
+rule lora:
+    input:
+        gaussians=RESULTS / "{scene}" / "gaussians.h5",
+    output:
+        directory(RESULTS / "{scene}" / "lora"),
+    params:
+        stage_keys_hash=keys_hash("lora"),
+        scene=scene_yaml,
+    log:
+        RESULTS / "{scene}" / "logs" / "lora.log",
+    benchmark:
+        RESULTS / "{scene}" / "benchmarks" / "lora.tsv"
+    threads: 2
+    resources:
+        mem_mb=16000,
+    shell:
+        "pm-lora --scene {params.scene} --gaussians {input.gaussians} --out {output} --device " + DEVICE + " > {log} 2>&1"
+
+
+rule invert:
+    input:
+        unpack(artifacts_and_lora("coarse", "gaussians")),
+    output:
+        RESULTS / "{scene}" / "latents.h5",
+    params:
+        stage_keys_hash=keys_hash("invert"),
+        scene=scene_yaml,
+        lora=optional_flag("--lora", "lora"),
+    log:
+        RESULTS / "{scene}" / "logs" / "invert.log",
+    benchmark:
+        RESULTS / "{scene}" / "benchmarks" / "invert.tsv"
+    threads: 2
+    resources:
+        mem_mb=16000,
+    shell:
+        "pm-invert --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}{params.lora}"
+        " --out {output} --device " + DEVICE + " > {log} 2>&1"
+
+
+rule enhance:
+    input:
+        unpack(artifacts_and_lora("coarse", "gaussians", latents=True)),
+    output:
+        video=RESULTS / "{scene}" / "video.mp4",
+        sheet=RESULTS / "{scene}" / "contact_sheet.png",
+    params:
+        stage_keys_hash=keys_hash("enhance"),
+        scene=scene_yaml,
+        latents=optional_flag("--latents", "latents"),
+        lora=optional_flag("--lora", "lora"),
+    log:
+        RESULTS / "{scene}" / "logs" / "enhance.log",
+    benchmark:
+        RESULTS / "{scene}" / "benchmarks" / "enhance.tsv"
+    threads: 2
+    resources:
+        mem_mb=8000,
+    shell:
+        "pm-enhance --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}"
+        "{params.latents}{params.lora} --out {output.video} --device " + DEVICE + " > {log} 2>&1"

@@ -1,0 +1,20 @@
+rule render:
+    input:
+        gaussians=RESULTS / "{scene}" / "gaussians.h5",
+        trajectories=RESULTS / "{scene}" / "trajectories.h5",
+    output:
+        coarse=RESULTS / "{scene}" / "coarse.h5",
+        video=RESULTS / "{scene}" / "coarse.mp4",
+    params:
+        stage_keys_hash=keys_hash("render"),
+        scene=scene_yaml,
+    log:
+        RESULTS / "{scene}" / "logs" / "render.log",
+    benchmark:
+        RESULTS / "{scene}" / "benchmarks" / "render.tsv"
+    threads: 2
+    resources:
+        mem_mb=4000,
+    shell:
+        "pm-render --scene {params.scene} --gaussians {input.gaussians} --trajectories {input.trajectories}"
+        " --out {output.coarse} --video {output.video} --device " + DEVICE + " > {log} 2>&1"

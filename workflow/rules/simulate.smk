@@ -1,0 +1,19 @@
+rule simulate:
+    input:
+        gaussians=RESULTS / "{scene}" / "gaussians.h5",
+    output:
+        trajectories=RESULTS / "{scene}" / "trajectories.h5",
+        setup=RESULTS / "{scene}" / "setup.png",
+    params:
+        stage_keys_hash=keys_hash("simulate"),
+        scene=scene_yaml,
+    log:
+        RESULTS / "{scene}" / "logs" / "simulate.log",
+    benchmark:
+        RESULTS / "{scene}" / "benchmarks" / "simulate.tsv"
+    threads: 2
+    resources:
+        mem_mb=4000,
+    shell:
+        "pm-simulate --scene {params.scene} --gaussians {input.gaussians} --out {output.trajectories}"
+        " --device " + DEVICE + " > {log} 2>&1"
