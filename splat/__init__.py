@@ -1,0 +1,17 @@
+"""Differentiable Gaussian rasterizer (Warp kernels, torch autograd) and 3DGS PLY I/O.
+
+Standard 3DGS semantics (DESIGN.md, "Rasterizer"): EWA projection with 0.3 px
+dilation, alpha clamped to 0.99, a Gaussian reaches the pixels where its alpha
+is at least 1/255, front to back by camera z (ties by index), compositing stops
+before the transmittance falls below 1e-4. The pipeline, one module per step:
+``project`` -> ``binning`` -> ``composite``; ``rasterize`` chains them.
+"""
+import warp as _wp
+
+_wp.init()  # from_torch and launches need the runtime; init is idempotent
+
+from .camera import Camera  # noqa: E402
+from .covariance import covariances_from_scales_rotations  # noqa: E402
+from .rasterize import Render, rasterize  # noqa: E402
+
+__all__ = ["Camera", "Render", "rasterize", "covariances_from_scales_rotations"]
