@@ -1,0 +1,119 @@
+"""Initial Gaussians: the front surface lifted from the depth prior, the back closed, the rim walled.
+
+The simulator fills each object's interior by ray parity on an occupancy grid,
+so the Gaussians of one object must enclose a volume: front sheet + back sheet
++ a wall along the silhouette between them. Each surface Gaussian is a flat
+disc (surfel) tangent to its sheet, sized to cover its pixel's footprint.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial.transform import Rotation
+
+from .depth import ObjectDepth
+from .geometry import pixel_rays
+
+SIGMA_PER_SPACING = 0.6
+"""Surfel standard deviation per sample spacing: neighbours overlap, so the sheet has no gaps."""
+MAX_STRETCH = 4.0
+"""A steep surfel stretches along the slope at most this many spacings (the rim wall closes the rest)."""
+THICKNESS_PER_SPACING = 0.15
+"""Surfel thickness (along its normal) per sample spacing."""
+INITIAL_OPACITY = 0.9
+
+
+@dataclass
+class Gaussians:
+    """G Gaussians (DESIGN.md conventions): means (G,3) m, scales (G,3) m, rotations (G,4) wxyz,
+    opacities (G,) in [0,1], colors (G,3) sRGB in [0,1], object_id (G,) int."""
+
+    means: np.ndarray
+    scales: np.ndarray
+    rotations: np.ndarray
+    opacities: np.ndarray
+    colors: np.ndarray
+    object_id: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.means)
+
+    @staticmethod
+    def concatenate(parts: list["Gaussians"]) -> "Gaussians":
+        return Gaussians(**{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(Gaussians)})
+
+    def select(self, keep: np.ndarray) -> "Gaussians":
+        return Gaussians(**{f.name: getattr(self, f.name)[keep] for f in fields(Gaussians)})
+
+
+def _filled(depth: np.ndarray) -> np.ndarray:
+    """``depth`` with NaNs replaced by the nearest valid value, so finite differences work at the rim."""
+    invalid = ~np.isfinite(depth)
+    _, (rows, cols) = ndimage.distance_transform_edt(invalid, return_indices=True)
+    return depth[rows, cols]
+
+
+def _surfels(points: np.ndarray, pixels: np.ndarray, stride: int, colors: np.ndarray, object_id: int) -> Gaussians:
+    """Surfels at ``points`` (H,W,3) on the pixels (H,W bool) of a stride-``stride`` grid."""
+    d_col = np.gradient(points, axis=1) * stride  # metres between neighbouring samples
+    d_row = np.gradient(points, axis=0) * stride
+    d_col, d_row, centres = d_col[pixels], d_row[pixels], points[pixels]
+    normal = np.cross(d_col, d_row)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
+    axis1 = d_col - (d_col * normal).sum(1, keepdims=True) * normal
+    axis1 /= np.linalg.norm(axis1, axis=1, keepdims=True) + 1e-12
+    axis2 = np.cross(normal, axis1)
+    # The un-stretched spacing: one sample's footprint, the smaller of the two tangent lengths' in-plane parts.
+    len1 = np.abs((d_col * axis1).sum(1))
+    len2 = np.abs((d_row * axis2).sum(1))
+    spacing = np.minimum(len1, len2)
+    scales = SIGMA_PER_SPACING * np.stack([np.minimum(len1, MAX_STRETCH * spacing),
+                                           np.minimum(len2, MAX_STRETCH * spacing),
+                                           THICKNESS_PER_SPACING / SIGMA_PER_SPACING * spacing], axis=1)
+    rotations = Rotation.from_matrix(np.stack([axis1, axis2, normal], axis=2)).as_quat(scalar_first=True)
+    count = len(centres)
+    return Gaussians(centres, scales, rotations, np.full(count, INITIAL_OPACITY), colors[pixels],
+                     np.full(count, object_id))
+
+
+def _rim_wall(front: np.ndarray, back: np.ndarray, rays: np.ndarray, pixels: np.ndarray, spacing: np.ndarray,
+              colors: np.ndarray, object_id: int) -> Gaussians:
+    """Isotropic Gaussians from front to back along the rays of the silhouette's edge pixels, one spacing apart."""
+    edge = pixels & ~ndimage.binary_erosion(pixels, border_value=0)
+    rows, cols = np.nonzero(edge)
+    counts = np.maximum(1, np.ceil((back[edge] - front[edge]) / spacing[edge]).astype(int) - 1)
+    steps = np.concatenate([(np.arange(1, c + 1) / (c + 1)) for c in counts])
+    idx = np.repeat(np.arange(len(rows)), counts)
+    z = front[rows[idx], cols[idx]] + steps * (back - front)[rows[idx], cols[idx]]
+    means = rays[rows[idx], cols[idx]] * z[:, None]
+    sigma = SIGMA_PER_SPACING * spacing[rows[idx], cols[idx]]
+    count = len(means)
+    return Gaussians(means, np.repeat(sigma[:, None], 3, axis=1), np.tile([1.0, 0, 0, 0], (count, 1)),
+                     np.full(count, INITIAL_OPACITY), colors[rows[idx], cols[idx]], np.full(count, object_id))
+
+
+def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id: int,
+                front_stride: int = 1, back_stride: int = 2) -> Gaussians:
+    """Closed surface of Gaussians of one object.
+
+    Args:
+        depth: camera-space front/back z (H,W) of the object at the lifting resolution, NaN off it.
+        K: (3,3) intrinsics at that resolution.
+        photo: RGB u8 (H,W,3) at that resolution; front and back take the pixel's colour.
+        front_stride, back_stride: sample every n-th pixel (the back is never seen, so it can be coarser).
+    """
+    height, width = depth.front.shape
+    rays = pixel_rays(K, height, width)
+    rays = rays / rays[..., 2:3]  # point = ray * z
+    colors = photo.astype(np.float64) / 255.0
+    pixels = depth.pixels
+    parts = []
+    for z, stride in ((depth.front, front_stride), (depth.back, back_stride)):
+        grid = np.zeros_like(pixels)
+        grid[stride // 2::stride, stride // 2::stride] = True
+        parts.append(_surfels(rays * _filled(z)[..., None], pixels & grid, stride, colors, object_id))
+    wall_spacing = back_stride * depth.front / K[0, 0]  # metres per pixel at the front surface, times the stride
+    parts.append(_rim_wall(_filled(depth.front), _filled(depth.back), rays, pixels, wall_spacing, colors, object_id))
+    return Gaussians.concatenate(parts)

@@ -1,0 +1,84 @@
+"""The reconstruction of one scene, step by step, without file output (cli.py writes it)."""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from schemas import InputError, Scene
+
+from .background import inpaint_background
+from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
+from .geometry import intrinsics_from_fov, working_size
+from .lift import Gaussians, lift_object
+from .segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
+
+log = logging.getLogger("physmotion.reconstruct")
+
+
+@dataclass
+class Prepared:
+    """Everything before the optimisation, at full photo resolution unless named otherwise."""
+
+    photo: np.ndarray          # RGB u8 (H,W,3)
+    labels: np.ndarray         # u8 (H,W): 0 background, k+1 object k
+    background: np.ndarray     # RGB u8 (H,W,3)
+    K: np.ndarray              # (3,3) at full resolution
+    depths: list[ObjectDepth]  # per object, camera-space z (H,W)
+    depth_prior: np.ndarray    # f32 (H,W) metres along the ray, NaN off objects
+    initial: Gaussians
+
+
+def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -> np.ndarray:
+    """``image`` at ``size`` (w, h): area averaging for colour, nearest for labels and NaN-masked depth."""
+    if image.shape[1::-1] == size:
+        return image
+    return cv2.resize(image, size, interpolation=cv2.INTER_NEAREST if labels else cv2.INTER_AREA)
+
+
+def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
+            depth_model: Optional[Path] = None) -> Prepared:
+    """Segment, inpaint, estimate depth and lift the initial Gaussians of ``scene``."""
+    photo, alpha = read_photo(scene.image)
+    height, width = photo.shape[:2]
+    K = intrinsics_from_fov(scene.camera.fov_deg, width, height)
+    sam = SamSegmenter(sam_model, device) if sam_model is not None else None
+    specs = [ObjectSpec(mask=o.mask, box=o.box) for o in scene.objects]
+    labels = segment_objects(photo, alpha, specs, scene.file, sam)
+    log.info("segmented %d object(s): %s pixels", len(specs),
+             ", ".join(str(int((labels == k + 1).sum())) for k in range(len(specs))))
+    background = inpaint_background(photo, labels)
+    inverse_depth = DptDepth(depth_model, device).inverse_depth(photo) if depth_model is not None else None
+    depths = object_depths(labels, K, [o.size_m for o in scene.objects], inverse_depth)
+    for k, d in enumerate(depths):
+        log.info("object %d: front depth %.3f-%.3f m, back up to %.3f m", k, np.nanmin(d.front),
+                 np.nanmax(d.front), np.nanmax(d.back))
+    initial = initial_gaussians(scene, photo, labels, depths, K)
+    return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial)
+
+
+def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depths: list[ObjectDepth],
+                      K: np.ndarray) -> Gaussians:
+    """Lift every object at the working resolution (reconstruct.resolution), or place reconstruct.init_ply."""
+    height, width = labels.shape
+    size = working_size(width, height, scene.reconstruct.resolution)
+    K_work = K.copy()
+    K_work[:2] *= size[0] / width
+    photo_work = downsample(photo, size)
+    if scene.reconstruct.init_ply is not None:
+        from .ply import place_ply  # only when asked: it needs splat's PLY reader
+
+        if len(scene.objects) != 1:
+            raise InputError(scene.file, "reconstruct.init_ply", "an initial PLY describes one object but the "
+                             f"scene has {len(scene.objects)}", "use init_ply with a single object, or remove it")
+        return place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
+    parts = []
+    for k, d in enumerate(depths):
+        small = ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True))
+        parts.append(lift_object(small, K_work, photo_work, k))
+        log.info("object %d: %d initial Gaussians", k, len(parts[-1]))
+    return Gaussians.concatenate(parts)

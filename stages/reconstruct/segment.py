@@ -1,0 +1,153 @@
+"""Object masks from the photograph: mask files, boxes refined by GrabCut or SAM, image alpha.
+
+The result is one label image (H,W) u8: 0 background, k+1 for object k, as
+gaussians.h5 stores it in /image/mask.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Optional, Sequence
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from schemas import InputError
+
+log = logging.getLogger("physmotion.reconstruct")
+
+GRABCUT_ITERATIONS = 5
+DEFAULT_BOX_MARGIN = 0.05
+"""Without mask, box or alpha, GrabCut starts from the image less this fraction at each border."""
+
+
+@dataclass(frozen=True)
+class ObjectSpec:
+    """How one object is to be segmented (objects[k] of scene.yaml)."""
+
+    mask: Optional[Path] = None
+    box: Optional[tuple[float, float, float, float]] = None
+
+
+def read_photo(path: Path) -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """The photograph as RGB u8 (H,W,3) and its alpha (H,W) u8, None when it has none or it is all opaque."""
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None:
+        raise InputError(path, None, "cannot read this file as an image", "give a PNG or JPEG file")
+    if raw.dtype != np.uint8:  # 16-bit PNGs: keep the top byte
+        raw = (raw // 257).astype(np.uint8) if raw.dtype == np.uint16 else np.clip(raw, 0, 255).astype(np.uint8)
+    if raw.ndim == 2:
+        raw = cv2.cvtColor(raw, cv2.COLOR_GRAY2BGR)
+    rgb = cv2.cvtColor(raw[..., :3], cv2.COLOR_BGR2RGB)
+    alpha = raw[..., 3] if raw.shape[2] == 4 else None
+    if alpha is not None and alpha.min() == 255:
+        alpha = None
+    return rgb, alpha
+
+
+def largest_component(mask: np.ndarray) -> np.ndarray:
+    """The largest 8-connected component of a boolean mask (H,W); GrabCut leaves specks."""
+    labels, count = ndimage.label(mask, structure=np.ones((3, 3)))
+    if count <= 1:
+        return mask.astype(bool)
+    sizes = np.bincount(labels.ravel())[1:]
+    return labels == 1 + int(np.argmax(sizes))
+
+
+def grabcut(photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
+    """Boolean mask (H,W) of the object inside ``box`` [x0,y0,x1,y1] (pixels), by GrabCut."""
+    height, width = photo.shape[:2]
+    x0, y0 = int(np.floor(box[0])), int(np.floor(box[1]))
+    x1, y1 = min(width, int(np.ceil(box[2]))), min(height, int(np.ceil(box[3])))
+    labels = np.zeros((height, width), np.uint8)
+    bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
+    cv2.setRNGSeed(0)  # GrabCut's k-means initialisation draws from OpenCV's RNG
+    cv2.grabCut(cv2.cvtColor(photo, cv2.COLOR_RGB2BGR), labels, (x0, y0, x1 - x0, y1 - y0), bgd, fgd,
+                GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_RECT)
+    return largest_component((labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD))
+
+
+def read_mask(path: Path, shape: tuple[int, int], field: str) -> np.ndarray:
+    """Boolean mask from a mask image: non-zero (any channel, or alpha) is the object."""
+    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if raw is None:
+        raise InputError(path, field, "cannot read this file as an image", "give a PNG mask")
+    if raw.shape[:2] != shape:
+        raise InputError(path, field, f"mask is {raw.shape[1]}x{raw.shape[0]} but the photograph is "
+                         f"{shape[1]}x{shape[0]}", "make the mask exactly the photograph's size")
+    mask = (raw > 127) if raw.ndim == 2 else (raw > 127).any(axis=2)
+    if not mask.any():
+        raise InputError(path, field, "mask has no pixel above 127", "paint the object white on black")
+    return mask
+
+
+def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Sequence[ObjectSpec],
+                    scene_file: Path | str = "scene.yaml", sam: Optional["SamSegmenter"] = None) -> np.ndarray:
+    """Label image (H,W) u8: 0 background, k+1 object k.
+
+    Per object: its mask file; else its box, refined by SAM when ``sam`` is
+    given, by GrabCut otherwise; else (one object only) the image alpha; else
+    GrabCut from the whole image less a 5 % margin. Where masks overlap the
+    earlier object keeps the pixel.
+    """
+    height, width = photo.shape[:2]
+    labels = np.zeros((height, width), np.uint8)
+    for k, spec in enumerate(objects):
+        field = f"objects[{k}]"
+        if spec.mask is not None:
+            mask = read_mask(spec.mask, (height, width), f"{field}.mask")
+        elif spec.box is not None:
+            mask = sam.segment(photo, spec.box) if sam is not None else grabcut(photo, spec.box)
+        elif alpha is not None and len(objects) == 1:
+            mask = alpha > 127
+        elif len(objects) > 1:
+            raise InputError(scene_file, field, "several objects but this one has neither mask nor box",
+                             "give each object a mask file or a box [x0, y0, x1, y1]")
+        else:
+            mx, my = DEFAULT_BOX_MARGIN * width, DEFAULT_BOX_MARGIN * height
+            mask = grabcut(photo, (mx, my, width - mx, height - my))
+        free = mask & (labels == 0)
+        if not free.any():
+            raise InputError(scene_file, field, "segmentation found no pixel of this object (or only pixels "
+                             "of earlier objects)", "give a mask file, or a tighter box around the object")
+        if free.sum() < mask.sum():
+            log.warning("object %d overlaps an earlier object; %d pixels stay with the earlier one",
+                        k, int(mask.sum() - free.sum()))
+        labels[free] = k + 1
+    return labels
+
+
+class SamSegmenter:
+    """Segment Anything through transformers (SamModel), loaded from a local folder only.
+
+    The folder is what ``SamModel.save_pretrained`` + ``SamProcessor.save_pretrained``
+    write (e.g. a download of facebook/sam-vit-base): config.json, the weights and
+    preprocessor_config.json. Nothing is fetched from the network.
+    """
+
+    def __init__(self, model_dir: Path | str, device: str = "cpu"):
+        import torch
+        from transformers import SamModel, SamProcessor
+
+        model_dir = Path(model_dir)
+        for name in ("config.json", "preprocessor_config.json"):
+            if not (model_dir / name).is_file():
+                raise InputError(model_dir / name, None, "SAM model file is missing",
+                                 f"put a transformers SAM model (save_pretrained of SamModel and SamProcessor, "
+                                 f"e.g. facebook/sam-vit-base) in {model_dir}, or segment with a mask or box")
+        self.torch, self.device = torch, device
+        self.processor = SamProcessor.from_pretrained(model_dir, local_files_only=True)
+        self.model = SamModel.from_pretrained(model_dir, local_files_only=True).to(device).eval()
+
+    def segment(self, photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
+        """Boolean mask (H,W) of the object in ``box`` [x0,y0,x1,y1]: SAM's highest-scoring mask."""
+        inputs = self.processor(images=photo, input_boxes=[[list(map(float, box))]], return_tensors="pt")
+        with self.torch.no_grad():
+            out = self.model(pixel_values=inputs["pixel_values"].to(self.device),
+                             input_boxes=inputs["input_boxes"].to(self.device), multimask_output=True)
+        masks = self.processor.post_process_masks(out.pred_masks.cpu(), inputs["original_sizes"],
+                                                  inputs["reshaped_input_sizes"])[0][0]  # (3,H,W)
+        best = int(out.iou_scores[0, 0].argmax())
+        return largest_component(masks[best].numpy().astype(bool))
