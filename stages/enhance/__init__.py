@@ -1,0 +1,1 @@
+"""pm-enhance: coarse frames -> the final video (flow and diffusion backends)."""

@@ -1,0 +1,66 @@
+"""pm-enhance: coarse.h5 -> video.mp4 (+ contact_sheet.png beside it)."""
+from __future__ import annotations
+
+import argparse
+import logging
+from pathlib import Path
+
+from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, read_artifact
+from schemas.video import write_video
+
+from . import flow
+from .compositing import blend_over_background, resize_to, unpremultiply
+from .contact_sheet import contact_sheet, write_png
+
+log = logging.getLogger("physmotion.enhance")
+
+DESCRIPTION = """\
+Enhance the coarse render into the final video (paper Sec. 3.4), by the scene's enhance.backend:
+  flow       (default, no model weights) the photograph's own pixels, carried along with the
+             simulated motion through source_uv and trusted by source_confidence; the render
+             fills in surfaces the photograph never saw; blended over the inpainted background.
+  diffusion  Stable Diffusion 2.1 + ControlNets from local weights: needs --latents from pm-invert
+             (and --lora from pm-lora when enhance.diffusion.lora.enabled).
+Writes the video (H.264) and contact_sheet.png beside it (rows: coarse, input = coarse over the
+background, enhanced)."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = stage_parser("pm-enhance", DESCRIPTION)
+    parser.add_argument("--scene", required=True, type=Path, help="scene.yaml")
+    parser.add_argument("--coarse", required=True, type=Path, help="coarse.h5 from pm-render")
+    parser.add_argument("--gaussians", required=True, type=Path, help="gaussians.h5 from pm-reconstruct")
+    parser.add_argument("--latents", type=Path, help="latents.h5 from pm-invert (diffusion backend)")
+    parser.add_argument("--lora", type=Path, help="LoRA folder from pm-lora (diffusion backend)")
+    parser.add_argument("--out", required=True, type=Path, help="video.mp4 to write")
+    return parser
+
+
+def enhance(args: argparse.Namespace) -> None:
+    scene = load_scene(args.scene)
+    device = resolve_device(args.device)
+    coarse = read_artifact(args.coarse, CoarseArtifact)
+    gaussians = read_artifact(args.gaussians, GaussiansArtifact)
+    backend = scene.enhance.backend
+    log.info("backend %s, %d frames of %dx%d", backend, *coarse.alpha.shape[:1], coarse.width, coarse.height)
+    if backend == "flow":
+        frames = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold)
+    else:
+        if args.latents is None:
+            raise InputError(args.scene, "enhance.backend", "the diffusion backend needs the inverted latents",
+                             "run pm-invert first and pass its output with --latents")
+        from .diffusion import enhance_video  # imports diffusers: only when asked for
+
+        latents = read_artifact(args.latents, LatentsArtifact)
+        frames = enhance_video(scene, coarse, gaussians, latents, args.lora, device)
+    background = resize_to(gaussians.background, coarse.width, coarse.height)
+    sheet = contact_sheet({"coarse": coarse.rgb, "input": blend_over_background(
+        unpremultiply(coarse.rgb, coarse.alpha), coarse.alpha, background), "enhanced": frames}, coarse.fps)
+    write_video(args.out, frames, coarse.fps)
+    write_png(args.out.with_name("contact_sheet.png"), sheet)
+    log.info("wrote %s (config %s)", args.out, config_hash(stage_keys(scene, "enhance"))[:12])
+
+
+def main(argv=None) -> None:
+    run_main(enhance, build_parser(), argv)

@@ -1,0 +1,78 @@
+"""The flow backend: the photograph's own pixels, carried along with the simulated motion.
+
+Every coarse pixel knows (``source_uv``) where its surface was in the
+photograph at rest and (``source_confidence``) how visible that surface was
+there. Where the surface was seen we take the photograph's colour from that
+point; where it was hidden (the back, an opened fracture) we keep the render.
+The result is blended over the inpainted background with the rendered alpha.
+"""
+from __future__ import annotations
+
+import logging
+
+import cv2
+import numpy as np
+
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact
+
+from .compositing import blend_over_background, resize_to, unpremultiply
+
+log = logging.getLogger("physmotion.enhance.flow")
+
+EDGE_SOFTNESS_PX = 1.5
+"""Blur (output pixels) of the photograph's object mask: photo pixels at the silhouette mix in
+the old background, so their trust fades out over about this distance instead of leaving a halo."""
+
+
+def object_coverage(mask: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width) float32 in [0, 1]: how purely a photo pixel shows an object, at output resolution."""
+    inside = resize_to((mask > 0).astype(np.float32), width, height)
+    eroded = cv2.erode(inside, np.ones((3, 3), np.uint8))
+    return cv2.GaussianBlur(eroded, (0, 0), EDGE_SOFTNESS_PX)
+
+
+def sample_at(image: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear samples of an image at image points (pixel centres at +0.5).
+
+    Args:
+        image: (h, w) or (h, w, C) float32 at output resolution.
+        uv: (h', w', 2) image points in that resolution; NaN where there is nothing to sample.
+    Returns:
+        (h', w') or (h', w', C) float32; 0 where uv is NaN or outside the image.
+    """
+    maps = np.nan_to_num(uv - 0.5, nan=-10.0).astype(np.float32)  # cv2.remap puts pixel centres at integers
+    return cv2.remap(image, maps[..., 0], maps[..., 1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:
+    """Smooth step from 0 to 1 around ``threshold`` (width 0.2), so the switch between photo and render never pops."""
+    x = np.clip((np.nan_to_num(confidence) - threshold) / 0.2 + 0.5, 0.0, 1.0)
+    return x * x * (3 - 2 * x)
+
+
+def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float) -> np.ndarray:
+    """The flow-enhanced video.
+
+    Args:
+        coarse: the render, T frames of h x w.
+        gaussians: the reconstruction: photograph, object mask and inpainted background at full resolution.
+        threshold: source_confidence above which the photograph is trusted.
+    Returns:
+        (T, h, w, 3) uint8 RGB frames.
+    """
+    T, h, w = coarse.alpha.shape
+    scale = w / gaussians.width  # full-resolution image points -> output image points
+    photo = resize_to(gaussians.photo, w, h).astype(np.float32)
+    background = resize_to(gaussians.background, w, h)
+    coverage = object_coverage(gaussians.mask, w, h)
+    frames = np.empty((T, h, w, 3), np.uint8)
+    for t in range(T):
+        uv = coarse.source_uv[t] * scale
+        from_photo = sample_at(photo, uv)
+        weight = (trust(coarse.source_confidence[t], threshold) * sample_at(coverage, uv))[..., None]
+        rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
+        colour = weight * from_photo + (1.0 - weight) * rendered
+        frames[t] = blend_over_background(colour, coarse.alpha[t], background)
+        log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph", t + 1, T,
+                 100.0 * float(weight[..., 0][coarse.alpha[t] > 0.5].mean()) if (coarse.alpha[t] > 0.5).any() else 0.0)
+    return frames
