@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Annotated, Any, List, Literal, Optional, Tuple, Union
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator, PrivateAttr
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator, PrivateAttr
 
 from .diffusion import DiffusionSettings
 from .materials import Jelly, Material
@@ -65,9 +65,6 @@ class GroundConfig(_Strict):
     friction: float = Field(0.3, ge=0, description="Coulomb friction coefficient (type: friction)")
 
 
-Region = Union[Literal["all"], "BoxRegion", "SphereRegion"]
-
-
 class BoxRegion(_Strict):
     box: Tuple[float, float, float, float, float, float] = Field(description="[x0, y0, z0, x1, y1, z1] in [0,1]^3")
 
@@ -90,9 +87,29 @@ class SphereRegion(_Strict):
         return s
 
 
+REGION_FORMS = "'all', {box: [x0, y0, z0, x1, y1, z1]} or {sphere: [cx, cy, cz, radius]} in the object's [0,1]^3 box"
+
+
+def _parse_region(value: Any) -> Union[str, BoxRegion, SphereRegion]:
+    """One clear message for every malformed region, instead of one per union member."""
+    if value == "all" or isinstance(value, (BoxRegion, SphereRegion)):
+        return value
+    kinds = {"box": BoxRegion, "sphere": SphereRegion}
+    if isinstance(value, dict) and len(value) == 1 and next(iter(value)) in kinds:
+        try:
+            return kinds[next(iter(value))].model_validate(value)
+        except ValidationError as err:
+            raise ValueError(f"region must be {REGION_FORMS}; this {next(iter(value))} is not "
+                             f"({err.errors()[0]['msg'].lower()})") from None
+    raise ValueError(f"region must be {REGION_FORMS}, got {value!r}")
+
+
+Region = Annotated[Union[Literal["all"], BoxRegion, SphereRegion], BeforeValidator(_parse_region)]
+
+
 class _Condition(_Strict):
     object: int = Field(0, ge=0, description="index into objects")
-    region: Region = Field("all", description="'all', {box: [...]} or {sphere: [...]}")
+    region: Region = Field("all", description=REGION_FORMS)
 
 
 class _Windowed(_Condition):
@@ -227,7 +244,7 @@ def _explain(err: dict) -> Tuple[str, str]:
         return "required key is missing", "add it (see docs/scene.schema.json)"
     if kind == "union_tag_invalid":
         return msg, "use one of the listed values"
-    return msg, "see docs/scene.schema.json for the allowed values and units"
+    return msg.removeprefix("Value error, "), "see docs/scene.schema.json for the allowed values and units"
 
 
 def _resolve_paths(scene: Scene, folder: Path) -> None:
