@@ -110,8 +110,8 @@ class _ProjectGaussians(torch.autograd.Function):
         distances = torch.zeros(G, device=device)
         depths = torch.zeros(G, device=device)
         camera_args = _CameraArgs.of(camera)
-        inputs = [wp.from_torch(means, dtype=wp.vec3), wp.from_torch(covariances, dtype=wp.mat33),
-                  *camera_args.as_list()]
+        inputs = [wp.from_torch(means.detach(), dtype=wp.vec3),
+                  wp.from_torch(covariances.detach(), dtype=wp.mat33), *camera_args.as_list()]
         outputs = [wp.from_torch(means2d, dtype=wp.vec2), wp.from_torch(conics, dtype=wp.vec3),
                    wp.from_torch(distances), wp.from_torch(depths)]
         wp.launch(project_gaussians_kernel, dim=G, inputs=inputs, outputs=outputs,
@@ -132,8 +132,8 @@ class _ProjectGaussians(torch.autograd.Function):
                    for t in (wp.vec2, wp.vec3, float, float)]
         wp.launch(
             project_gaussians_kernel, dim=G,
-            inputs=[wp.from_torch(means, dtype=wp.vec3), wp.from_torch(covariances, dtype=wp.mat33),
-                    *ctx.camera_args.as_list()],
+            inputs=[wp.from_torch(means.detach(), dtype=wp.vec3),
+                    wp.from_torch(covariances.detach(), dtype=wp.mat33), *ctx.camera_args.as_list()],
             outputs=scratch,
             adj_inputs=[wp.from_torch(grad_means, dtype=wp.vec3), wp.from_torch(grad_covariances, dtype=wp.mat33),
                         *_CameraArgs.zeros()],
