@@ -1,0 +1,1 @@
+"""pm-simulate: MLS-MPM simulation of the reconstructed objects (and pm-render)."""

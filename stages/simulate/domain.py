@@ -1,0 +1,97 @@
+"""Gravity, the simulation frame, the grid that covers the expected motion, and the CFL substep.
+
+World = the input camera frame (x right, y down, z forward). The simulation
+runs in a rotated copy of it, x_sim = Q x_world, whose +y points *up*
+(against gravity), so the ground is a grid plane and walls are grid faces.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .constitutive import wave_speed
+from .mpm import BOUNDARY_NODES, Grid
+
+STANDARD_GRAVITY = 9.81  # m/s^2
+# Substep = CFL * dx / (wave speed + particle speed): explicit MLS-MPM is stable well below 1.
+CFL = 0.4
+
+
+def world_gravity(gravity: tuple | None, pitch_deg: float) -> np.ndarray:
+    """Gravity in the world (camera) frame, m/s^2.
+
+    None: 9.81 m/s^2 down in the picture (+y) for a level camera. A camera
+    pitched down by p looks partly along gravity, so gravity turns about the
+    camera's x axis toward its forward axis: g (0, cos p, sin p).
+    """
+    if gravity is not None:
+        return np.asarray(gravity, dtype=np.float64)
+    p = math.radians(pitch_deg)
+    return STANDARD_GRAVITY * np.array([0.0, math.cos(p), math.sin(p)])
+
+
+def simulation_rotation(down: np.ndarray) -> np.ndarray:
+    """Rotation Q (3,3), x_sim = Q x_world, taking the unit `down` direction to -y_sim.
+
+    Rows: sim x = world x made orthogonal to up (so the picture's x stays x),
+    sim y = up, sim z = x cross y (right-handed).
+    """
+    up = -down / np.linalg.norm(down)
+    x = np.array([1.0, 0.0, 0.0]) - up[0] * up
+    if np.linalg.norm(x) < 1e-6:  # gravity along the picture's x axis
+        x = np.array([0.0, 0.0, 1.0]) - up[2] * up
+    x /= np.linalg.norm(x)
+    return np.stack([x, up, np.cross(x, up)])
+
+
+def down_direction(gravity_world: np.ndarray, pitch_deg: float) -> np.ndarray:
+    """Unit vector of 'down': along gravity, or the camera's default when gravity is zero."""
+    norm = np.linalg.norm(gravity_world)
+    if norm > 0:
+        return gravity_world / norm
+    return world_gravity(None, pitch_deg) / STANDARD_GRAVITY
+
+
+def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: float, velocities: np.ndarray,
+             ground: bool, walls: bool) -> Grid:
+    """Grid over the rest particles plus room for the motion expected in `duration_s`.
+
+    Args:
+        rest_sim: (P,3) rest positions in the simulation frame, m.
+        cells: grid cells along the longest side of the domain (physics.grid).
+        gravity: |g|, m/s^2.
+        velocities: (N,3) velocities the conditions give (simulation frame), m/s.
+        ground: the ground is the lowest rest point; nothing goes below it.
+        walls: close the domain tightly around the objects.
+
+    Each side gets room for the travel of the conditions' velocities toward
+    it, between half and twice the objects' size (a quarter above and for
+    walls), so a wild condition cannot dilute the resolution; what would leave
+    the domain stops at its walls (mpm.grid_to_particle).
+    """
+    lo, hi = rest_sim.min(axis=0), rest_sim.max(axis=0)
+    size = float(max(hi - lo))
+    v = np.vstack([np.zeros((1, 3)), velocities])
+    travel_hi = np.max(np.maximum(v, 0.0), axis=0) * duration_s
+    travel_lo = np.max(np.maximum(-v, 0.0), axis=0) * duration_s
+    margin_hi = np.clip(0.5 * size + travel_hi, 0.5 * size, 2.0 * size)
+    margin_lo = np.clip(0.5 * size + travel_lo, 0.5 * size, 2.0 * size)
+    rise = travel_hi[1] ** 2 / (2.0 * gravity * duration_s ** 2) if gravity > 0 else travel_hi[1]
+    margin_hi[1] = np.clip(0.25 * size + rise, 0.25 * size, 2.0 * size)
+    fall = 0.5 * gravity * duration_s ** 2 + travel_lo[1]
+    margin_lo[1] = 0.0 if ground else np.clip(0.25 * size + fall, 0.25 * size, 2.0 * size)
+    if walls:
+        margin_lo[[0, 2]] = margin_hi[[0, 2]] = 0.25 * size
+    extent = (hi - lo) + margin_lo + margin_hi
+    dx = float(max(extent)) / cells
+    # the ground (or the domain floor) lies exactly on node plane BOUNDARY_NODES
+    origin = lo - margin_lo - BOUNDARY_NODES * dx
+    shape = np.ceil(extent / dx).astype(int) + 2 * BOUNDARY_NODES + 1
+    return Grid(origin=tuple(float(o) for o in origin), dx=dx, shape=tuple(int(n) for n in shape))
+
+
+def cfl_substep(dx: float, materials: list, max_speed: float) -> float:
+    """Largest stable substep in s: CFL * dx / (fastest elastic wave + fastest particle)."""
+    c = max(wave_speed(m) for m in materials)
+    return CFL * dx / (c + max_speed)
