@@ -12,6 +12,8 @@ _wp.init()  # from_torch and launches need the runtime; init is idempotent
 
 from .camera import Camera  # noqa: E402
 from .covariance import covariances_from_scales_rotations  # noqa: E402
+from .ply import GaussianCloud, read_ply, write_ply  # noqa: E402
 from .rasterize import Render, rasterize  # noqa: E402
 
-__all__ = ["Camera", "Render", "rasterize", "covariances_from_scales_rotations"]
+__all__ = ["Camera", "Render", "rasterize", "covariances_from_scales_rotations",
+           "GaussianCloud", "read_ply", "write_ply"]

@@ -9,7 +9,8 @@ Besides the render, it returns a mask of the pixels whose value float32
 rounding cannot change discontinuously: no Gaussian's alpha within 1e-3
 relative of 1/255, no transmittance within 1e-3 relative of the 1e-4 stop, no
 two Gaussians reaching the pixel at depths that differ by float32 rounding
-only, no Gaussian within rounding of the near plane.
+only (1e-6 relative, unless exactly equal), no Gaussian within rounding of the
+near plane.
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ T_MIN = 1e-4
 DILATION = 0.3
 FOV_CLAMP = 1.3
 THRESHOLD_RTOL = 1e-3
-DEPTH_TIE_RTOL = 1e-5
+DEPTH_TIE_RTOL = 1e-6
 MAX_PAIRS_PER_CHUNK = 2_000_000
 
 
@@ -87,11 +88,12 @@ def render_reference(means, opacities, features, K, world_to_camera, width, heig
 
     # Gaussians whose order or culling float32 rounding could change.
     zd = z.detach()
-    near_tie = torch.zeros_like(visible)
-    gap = (zd[1:] - zd[:-1]).abs()
+    gap = zd[1:] - zd[:-1]
     tie = (gap > 0) & (gap <= DEPTH_TIE_RTOL * torch.maximum(zd[1:].abs(), zd[:-1].abs()))
-    near_tie[1:] |= tie
-    near_tie[:-1] |= tie
+    group = torch.cat([torch.zeros(1, dtype=torch.long), torch.cumsum(~tie, 0)])  # runs of near-ties
+    sizes = torch.bincount(group)
+    tie_groups = torch.nonzero(sizes >= 2).flatten()
+    tie_membership = (group[:, None] == tie_groups[None]).to(f64)  # (G, groups of near-equal depth)
     near_cull = (zd - NEAR).abs() <= THRESHOLD_RTOL * NEAR
 
     rows, cols = torch.meshgrid(torch.arange(height, dtype=f64), torch.arange(width, dtype=f64), indexing="ij")
@@ -114,13 +116,14 @@ def render_reference(means, opacities, features, K, world_to_camera, width, heig
         out_d.append(weight @ distance)
 
         with torch.no_grad():
-            raw_d = raw.detach()
-            near_alpha = visible[None] & ((raw_d - ALPHA_MIN).abs() <= THRESHOLD_RTOL * ALPHA_MIN)
+            # Only Gaussians the compositing can still reach matter (transmittance before them above the stop).
+            in_play = visible[None] & (before.detach() >= T_MIN * (1 - THRESHOLD_RTOL))
+            near_alpha = in_play & ((raw.detach() - ALPHA_MIN).abs() <= THRESHOLD_RTOL * ALPHA_MIN)
             near_stop = (after.detach() - T_MIN).abs() <= THRESHOLD_RTOL * T_MIN
-            counted = reaches & (after.detach() >= T_MIN * (1 - THRESHOLD_RTOL))
+            counted = reaches & in_play
             ambiguous = near_alpha.any(1) | near_stop.any(1)
             ambiguous |= ((counted | near_alpha) & near_cull[None]).any(1)
-            ambiguous |= ((counted | near_alpha) & near_tie[None]).sum(1) >= 2
+            ambiguous |= (((counted | near_alpha).to(f64) @ tie_membership) >= 2).any(1)
             out_r.append(~ambiguous)
     return ReferenceRender(torch.cat(out_f).reshape(height, width, C), torch.cat(out_a).reshape(height, width),
                            torch.cat(out_d).reshape(height, width), torch.cat(out_r).reshape(height, width))
