@@ -55,7 +55,7 @@ def project_gaussians_kernel(
         cov_camera = rotation * covariances[i] * wp.transpose(rotation)
         cov2d = J * cov_camera * wp.transpose(J)
         a = cov2d[0, 0] + DILATION
-        b = cov2d[0, 1]
+        b = 0.5 * (cov2d[0, 1] + cov2d[1, 0])  # symmetric in both, so the covariance gradient is symmetric
         c = cov2d[1, 1] + DILATION
         det = a * c - b * b
         if det > 0.0:

@@ -5,9 +5,9 @@ other formulas where there is a choice): quaternions through the Rodrigues
 form, the 2D covariance inverted by torch.linalg, the front-to-back order by a
 stable sort of z, transmittance by a cumulative product.
 
-Besides the render, it returns a mask of the pixels whose value float32
-rounding cannot change discontinuously: no Gaussian's alpha within 1e-3
-relative of 1/255, no transmittance within 1e-3 relative of the 1e-4 stop, no
+Besides the render, it returns a mask of the pixels whose value or gradient
+float32 rounding cannot change discontinuously: no Gaussian's alpha within 1e-3
+relative of 1/255 or of the 0.99 clamp, no transmittance within 1e-3 relative of the 1e-4 stop, no
 two Gaussians reaching the pixel at depths that differ by float32 rounding
 only (1e-6 relative, unless exactly equal), no Gaussian within rounding of the
 near plane.
@@ -119,6 +119,8 @@ def render_reference(means, opacities, features, K, world_to_camera, width, heig
             # Only Gaussians the compositing can still reach matter (transmittance before them above the stop).
             in_play = visible[None] & (before.detach() >= T_MIN * (1 - THRESHOLD_RTOL))
             near_alpha = in_play & ((raw.detach() - ALPHA_MIN).abs() <= THRESHOLD_RTOL * ALPHA_MIN)
+            # The 0.99 clamp is continuous in value but not in gradient.
+            near_alpha |= in_play & ((raw.detach() - ALPHA_MAX).abs() <= THRESHOLD_RTOL * ALPHA_MAX)
             near_stop = (after.detach() - T_MIN).abs() <= THRESHOLD_RTOL * T_MIN
             counted = reaches & in_play
             ambiguous = near_alpha.any(1) | near_stop.any(1)
