@@ -1,0 +1,135 @@
+"""End to end: the Snakemake workflow on a tiny scene, what reruns after an edit, and the programs' exits."""
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
+from schemas.video import read_video
+
+from .conftest import write_scene
+
+REPO = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+ENV = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+
+
+def snakemake(workdir: Path, *args: str) -> str:
+    scenes, results = workdir / "scenes", workdir / "results"
+    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2",
+           "--config", f"scenes_dir={scenes}", f"results_dir={results}", "device=cpu", *args]
+    proc = subprocess.run(cmd, cwd=workdir, env=ENV, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout + proc.stderr
+
+
+def planned_jobs(workdir: Path) -> dict:
+    """Rule -> job count of a dry run (empty when nothing is to be done)."""
+    out = snakemake(workdir, "-n")
+    if "Nothing to be done" in out:
+        return {}
+    table = out.split("Job stats:")[1].split("Reasons:")[0]
+    return {rule: int(n) for rule, n in re.findall(r"^(\w+)\s+(\d+)\s*$", table, re.M) if rule not in ("total", "all")}
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory) -> Path:
+    """One complete workflow run of the tiny scene; later tests edit copies of it."""
+    workdir = tmp_path_factory.mktemp("workflow")
+    write_scene(workdir / "scenes" / "tiny")
+    snakemake(workdir)
+    return workdir
+
+
+@pytest.mark.slow
+def test_workflow_makes_every_artifact_and_a_video(finished_run):
+    out = finished_run / "results" / "tiny"
+    for name in ("gaussians.h5", "trajectories.h5", "setup.png", "coarse.h5", "coarse.mp4", "video.mp4",
+                 "contact_sheet.png", "logs/reconstruct.log", "benchmarks/simulate.tsv"):
+        assert (out / name).exists(), name
+    gaussians = read_artifact(out / "gaussians.h5", GaussiansArtifact)
+    trajectories = read_artifact(out / "trajectories.h5", TrajectoriesArtifact)
+    coarse = read_artifact(out / "coarse.h5", CoarseArtifact)
+    T = round(0.25 * 8) + 1
+    assert trajectories.positions.shape[0] == T and coarse.rgb.shape[0] == T
+    assert np.array_equal(trajectories.rest_positions[: len(gaussians.means)], gaussians.means)
+    frames, fps, codec = read_video(out / "video.mp4")
+    assert codec == "h264" and fps == 8 and frames.shape[0] == T
+    assert frames.shape[1] % 2 == 0 and frames.shape[2] % 2 == 0
+
+
+@pytest.mark.slow
+def test_second_run_does_nothing(finished_run):
+    assert planned_jobs(finished_run) == {}
+
+
+def edited_copy(finished_run: Path, tmp_path: Path, edit) -> Path:
+    workdir = tmp_path / "w"
+    shutil.copytree(finished_run, workdir, symlinks=True)
+    path = workdir / "scenes" / "tiny" / "scene.yaml"
+    scene = yaml.safe_load(path.read_text())
+    edit(scene)
+    path.write_text(yaml.safe_dump(scene, sort_keys=False))
+    return workdir
+
+
+@pytest.mark.slow
+def test_editing_physics_reruns_all_but_reconstruct(finished_run, tmp_path):
+    workdir = edited_copy(finished_run, tmp_path, lambda s: s["physics"].update(duration_s=0.125))
+    assert planned_jobs(workdir) == {"simulate": 1, "render": 1, "enhance": 1}
+
+
+@pytest.mark.slow
+def test_editing_enhance_reruns_only_enhance(finished_run, tmp_path):
+    workdir = edited_copy(finished_run, tmp_path, lambda s: s["enhance"].update(confidence_threshold=0.7))
+    assert planned_jobs(workdir) == {"enhance": 1}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("program", ["pm-reconstruct", "pm-simulate", "pm-render", "pm-enhance"])
+def test_program_refuses_wrong_artifact_without_output(finished_run, tmp_path, program):
+    """Each program given the wrong artifact exits 2 with one paragraph and writes nothing."""
+    r, s = finished_run / "results" / "tiny", finished_run / "scenes" / "tiny" / "scene.yaml"
+    wrong = str(r / "coarse.h5") if program != "pm-render" else str(r / "gaussians.h5")
+    out = tmp_path / "out.h5"
+    args = {"pm-reconstruct": ["--out", str(out)],
+            "pm-simulate": ["--gaussians", wrong, "--out", str(out)],
+            "pm-render": ["--gaussians", wrong, "--trajectories", wrong, "--out", str(out),
+                          "--video", str(tmp_path / "o.mp4")],
+            "pm-enhance": ["--coarse", wrong, "--gaussians", wrong, "--out", str(tmp_path / "o.mp4")]}[program]
+    scene = ["--scene", str(s)] if program != "pm-reconstruct" else ["--scene", str(tmp_path / "missing.yaml")]
+    proc = subprocess.run([str(BIN / program), *scene, *args, "--device", "cpu"], env=ENV, capture_output=True,
+                          text=True)
+    assert proc.returncode == 2, proc.stderr
+    assert "Fix:" in proc.stderr and "Traceback" not in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("program", ["pm-reconstruct", "pm-simulate", "pm-render", "pm-enhance"])
+def test_help_says_what_it_does(program):
+    proc = subprocess.run([str(BIN / program), "--help"], env=ENV, capture_output=True, text=True)
+    assert proc.returncode == 0 and "--device" in proc.stdout and len(proc.stdout) > 400
+
+
+@pytest.mark.slow
+def test_killed_stage_leaves_no_artifact(tmp_path):
+    scene = write_scene(tmp_path / "s")
+    raw = yaml.safe_load(scene.read_text())
+    raw["reconstruct"]["iterations"] = 100000
+    scene.write_text(yaml.safe_dump(raw))
+    out = tmp_path / "r" / "gaussians.h5"
+    proc = subprocess.Popen([str(BIN / "pm-reconstruct"), "--scene", str(scene), "--out", str(out), "--device", "cpu"],
+                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    time.sleep(8)
+    assert proc.poll() is None, "the stage should still be optimising"
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not out.exists()
