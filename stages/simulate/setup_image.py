@@ -47,9 +47,9 @@ def draw_setup(sim, photo: np.ndarray, K: np.ndarray) -> np.ndarray:
     for i, item in enumerate(sim.conditions.items):
         c = item.condition
         colour = CONDITION_COLOUR[c.type]
-        members = item.members[:: max(1, len(item.members) // 5000)]
-        for p in _project(K, x[members]):
-            cv2.circle(img, _pt(p), 1, colour, -1)
+        if c.region != "all":  # a whole object is already drawn
+            for p in _project(K, x[item.members[:: max(1, len(item.members) // 5000)]]):
+                cv2.circle(img, _pt(p), 1, colour, -1)
         m = sim.masses[item.members]
         centre = m @ x[item.members] / m.sum()
         vector = {"impulse": "velocity", "velocity": "velocity", "force": "force", "torque": "torque"}.get(c.type)

@@ -1,0 +1,21 @@
+"""Synthetic inputs for tests and benchmarks: Gaussians on the surface of boxes."""
+from __future__ import annotations
+
+import numpy as np
+
+
+def box_surface(lo, hi, spacing: float) -> np.ndarray:
+    """Points (N,3) on the six faces of the axis-aligned box [lo, hi] (m), about `spacing` apart."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    axes = [np.linspace(lo[a], hi[a], max(2, int(np.ceil((hi[a] - lo[a]) / spacing)) + 1)) for a in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
+    on_face = np.zeros(grid.shape[:3], bool)
+    for a in range(3):
+        on_face |= np.isclose(grid[..., a], lo[a]) | np.isclose(grid[..., a], hi[a])
+    return grid[on_face]
+
+
+def boxes(*extents, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Means (G,3) and object ids (G,) of one box per (lo, hi) pair, object k = k-th box."""
+    means = [box_surface(lo, hi, spacing) for lo, hi in extents]
+    return np.concatenate(means), np.concatenate([np.full(len(m), k) for k, m in enumerate(means)])
