@@ -19,8 +19,8 @@ from .compositing import blend_over_background, resize_to, unpremultiply
 
 log = logging.getLogger("physmotion.enhance.flow")
 
-EDGE_SOFTNESS_PX = 1.5
-"""Blur (output pixels) of the photograph's object mask: photo pixels at the silhouette mix in
+EDGE_SOFTNESS_PX = 0.5
+"""Blur (output pixels) of the photograph's eroded object mask: photo pixels on the silhouette mix in
 the old background, so their trust fades out over about this distance instead of leaving a halo."""
 
 

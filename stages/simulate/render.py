@@ -10,12 +10,10 @@ through them.
 from __future__ import annotations
 
 import logging
-import math
 
 import torch
 
 import splat
-from splat.project import project_gaussians
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
@@ -48,22 +46,66 @@ def project_to_photo(points: torch.Tensor, gaussians: GaussiansArtifact) -> torc
 
 
 def rest_visibility(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
-                    camera: splat.Camera) -> torch.Tensor:
-    """(G,) in [0, 1]: the fraction of each Gaussian's footprint that reached the photograph.
+                    gaussians: GaussiansArtifact) -> torch.Tensor:
+    """(G,) in [0, 1]: how visible each Gaussian was in the photograph, by a soft depth test.
 
-    Its blending weight summed over pixels, sum_p T_k(p) alpha_k(p), is the gradient of the
-    summed render with respect to its feature; dividing by its unoccluded footprint
-    sum_p alpha_k(p) ~ o_k 2 pi sqrt(det Sigma2D_k) leaves how much of it was in front.
+    A Gaussian was seen when it lies on the surface the photograph shows at its pixel: its
+    distance to the camera at most a tolerance (twice its own largest standard deviation plus
+    1 % of the distance) behind the rendered distance there (depth / alpha, Eq. 2). Gaussians
+    of the back or the interior fall far behind and get ~0. (A ratio of blending weight to
+    footprint cannot tell these apart: on a dense surface neighbours occlude each other too.)
     """
-    features = torch.ones(means.shape[0], 1, device=means.device, requires_grad=True)
-    rendered = splat.rasterize(means, opacities, features, camera, covariances=covariances).features
-    (weight_sum,) = torch.autograd.grad(rendered.sum(), features)
+    camera = full_camera(gaussians)
     with torch.no_grad():
-        conics = project_gaussians(means, covariances, camera).conics  # (a, b, c) of Sigma2D^-1
-        det_conic = (conics[:, 0] * conics[:, 2] - conics[:, 1] ** 2).clamp_min(1e-12)
-        footprint = opacities * 2 * math.pi / det_conic.sqrt()
-        visible = torch.where(conics.abs().sum(1) > 0, weight_sum[:, 0] / footprint.clamp_min(1e-12), 0.0)
-    return visible.clamp(0.0, 1.0)
+        rest = splat.rasterize(means, opacities, torch.zeros_like(means[:, :1]), camera, covariances=covariances)
+        surface = rest.depth / rest.alpha.clamp_min(MIN_ALPHA)
+        uv = project_to_photo(means, gaussians)
+        col = uv[:, 0].floor().long().clamp(0, camera.width - 1)
+        row = uv[:, 1].floor().long().clamp(0, camera.height - 1)
+        w2c = torch.as_tensor(gaussians.world_to_camera, dtype=means.dtype, device=means.device)
+        distance = (means @ w2c[:3, :3].T + w2c[:3, 3]).norm(dim=1)
+        tolerance = 2 * torch.linalg.eigvalsh(covariances)[:, -1].clamp_min(0).sqrt() + 0.01 * distance
+        behind = (distance - surface[row, col]).clamp_min(0)
+        in_view = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
+        seen = in_view & (rest.alpha[row, col] >= MIN_ALPHA)
+        return torch.where(seen, torch.exp(-(behind / tolerance) ** 2), 0.0)
+
+
+def fit_source_uv(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
+                  gaussians: GaussiansArtifact, iterations: int = 40) -> torch.Tensor:
+    """(G, 2) per-Gaussian photo coordinates whose rest render maps every pixel onto itself.
+
+    Blending the projected centres would not: at a pixel, Gaussians earlier in depth order
+    weigh more, which shifts the blended coordinate by a fraction of a pixel and blurs the
+    photograph when it is sampled there. The blend is linear in the features, so we solve
+    the least-squares problem  min_f  sum_p || sum_k w_k(p) f_k - alpha(p) p ||^2  (L-BFGS
+    through the rasterizer's feature gradient), starting from the projected centres.
+    Gaussians no pixel sees keep their projected centre.
+    """
+    camera = full_camera(gaussians)
+    rows, cols = torch.meshgrid(torch.arange(camera.height, device=means.device),
+                                torch.arange(camera.width, device=means.device), indexing="ij")
+    centres = torch.stack([cols, rows], -1).to(means.dtype) + 0.5
+    with torch.no_grad():
+        alpha = splat.rasterize(means, opacities, torch.zeros_like(means[:, :1]), camera,
+                                covariances=covariances).alpha
+    target = alpha[..., None] * centres
+    uv = project_to_photo(means, gaussians).clone().requires_grad_(True)
+    optimizer = torch.optim.LBFGS([uv], max_iter=iterations, history_size=10, line_search_fn="strong_wolfe",
+                                  tolerance_grad=1e-10, tolerance_change=1e-14)
+
+    def residual_loss():
+        optimizer.zero_grad()
+        loss = (splat.rasterize(means, opacities, uv, camera, covariances=covariances).features - target).square().sum()
+        loss.backward()
+        return loss
+
+    before = float(residual_loss().detach())
+    optimizer.step(residual_loss)
+    covered = float((alpha >= MIN_ALPHA).sum().clamp_min(1))
+    log.info("source_uv fitted: rms error %.3f px -> %.3f px", (before / covered) ** 0.5,
+             (float(residual_loss().detach()) / covered) ** 0.5)
+    return uv.detach()
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
@@ -76,8 +118,9 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
     camera = render_camera(gaussians, width)
     rest_means, opacities = t(gaussians.means), t(gaussians.opacities)
     rest_cov = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
-    visibility = rest_visibility(rest_means, rest_cov, opacities, full_camera(gaussians))
-    features = torch.cat([t(gaussians.colors), project_to_photo(rest_means, gaussians), visibility[:, None]], 1)
+    visibility = rest_visibility(rest_means, rest_cov, opacities, gaussians)
+    source_uv = fit_source_uv(rest_means, rest_cov, opacities, gaussians)
+    features = torch.cat([t(gaussians.colors), source_uv, visibility[:, None]], 1)
     log.info("%d Gaussians, %.0f%% visible in the photograph; rendering %d frames at %dx%d",
              G, 100 * float((visibility > 0.5).float().mean()), trajectories.positions.shape[0],
              camera.width, camera.height)
