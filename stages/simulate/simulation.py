@@ -53,6 +53,9 @@ class Simulation:
         self.physics, self.materials, self.scene_file, self.device = physics, list(materials), scene_file, device
         means = np.asarray(means, np.float64)
         object_id = np.asarray(object_id, np.int64)
+        if object_id.min(initial=0) < 0 or object_id.max(initial=0) >= len(self.materials):
+            raise InputError(scene_file, "objects", f"the Gaussians name objects up to {object_id.max()} but the "
+                             f"scene lists {len(self.materials)}", "rerun pm-reconstruct with this scene")
         for k in range(len(self.materials)):
             if not np.any(object_id == k):
                 raise InputError(scene_file, f"objects[{k}]", "the reconstruction has no Gaussian for this object",
@@ -82,6 +85,7 @@ class Simulation:
         self.material_id = np.array([PRESETS.index(m.preset) for m in self.materials])[self.object_id]
 
         rest_sim = self.rest_world @ self.Q.T
+        self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         self.grid = domain.fit_grid(rest_sim, physics.grid, **fit)
         ground = physics.ground
         self.ground = Ground(GROUND_TYPES[ground.type] if ground.enabled else GROUND_NONE, ground.friction)
@@ -95,6 +99,7 @@ class Simulation:
         self.conditions = Conditions(physics.conditions, self.rest_world, self.object_id, self.masses, self.Q,
                                      device, scene_file)
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
+        self._warned_walls = False
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
         log.info("%d particles (%d Gaussians + %d fill), grid %s of %.1f mm cells, %d frames",
@@ -156,6 +161,22 @@ class Simulation:
         diag["momentum"][f] = m @ v
         diag["angular_momentum"][f] = m @ np.cross(x, v)
         diag["max_speed"][f] = np.sqrt(np.max(np.sum(v * v, axis=1))) if len(v) else 0.0
+        self._warn_at_walls(f, x_sim)
+
+    def _warn_at_walls(self, f: int, x_sim: np.ndarray) -> None:
+        """Say once when particles reach the domain's edge (mpm.grid_to_particle holds them there)."""
+        g = self.grid
+        lo = np.asarray(g.origin) + BOUNDARY_NODES * g.dx
+        hi = np.asarray(g.origin) + (np.asarray(g.shape) - 1 - BOUNDARY_NODES) * g.dx
+        tol = 1e-3 * g.dx
+        at_low = x_sim <= lo + tol
+        at_low[:, 1] &= self.ground.kind == GROUND_NONE  # resting on the ground is not leaving the domain
+        n = int(np.count_nonzero(np.any(at_low | (x_sim >= hi - tol), axis=1)))
+        if n and not self._warned_walls:
+            self._warned_walls = True
+            log.warning("frame %d: %d particles reached the edge of the simulation domain and are held there; "
+                        "the objects travel farther than %.2f m from where they start (twice their size): "
+                        "shorten physics.duration_s or weaken the conditions", f, n, 2 * self._size)
 
     def _check(self, f: int, h: float, x: np.ndarray, max_speed: float) -> None:
         """Stop with a message naming the frame, the object and the likely fix when the run blew up."""

@@ -1,0 +1,128 @@
+"""pm-simulate as a program and its building blocks: fill, gravity/frame, regions, errors, the artifact."""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+import warp as wp
+
+from schemas import InputError
+from schemas import materials as M
+from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, read_artifact, write_artifact
+from schemas.scene import PhysicsConfig, SphereRegion
+from stages.simulate import cli, domain
+from stages.simulate.conditions import region_members
+from stages.simulate.fill import fill_object
+from stages.simulate.simulation import Simulation
+from stages.simulate.synthetic import box_surface, boxes
+
+wp.config.quiet = True
+
+
+def test_fill_of_a_sphere_shell_has_the_sphere_volume():
+    """Ray-parity fill of Gaussians on a sphere's surface: volume within 10 % of 4/3 pi r^3, every fill
+    particle inside r + one cell, and the requested density (8 per interior cell)."""
+    rng = np.random.default_rng(0)
+    d = rng.standard_normal((20000, 3))
+    r, dx = 0.1, 0.01
+    means = r * d / np.linalg.norm(d, axis=1, keepdims=True)
+    fill, gauss_volume, fill_volume = fill_object(means, dx, 8)
+    assert gauss_volume.sum() + fill_volume.sum() == pytest.approx(4 / 3 * math.pi * r ** 3, rel=0.1)
+    assert np.linalg.norm(fill, axis=1).max() < r + math.sqrt(3) * dx
+    assert len(fill) == pytest.approx(8 * 4 / 3 * math.pi * (r / dx) ** 3, rel=0.2)
+
+
+def test_fill_ignores_huge_covariances_and_is_bounded_by_the_grid():
+    """Only the means matter: the occupancy grid is at most (extent / dx + 3)^3 cells whatever else."""
+    means = box_surface((0, 0, 0), (0.1, 0.05, 0.02), 0.005)
+    fill, _, _ = fill_object(means, 0.01, 1)
+    assert len(fill) <= (10 + 3) * (5 + 3) * (2 + 3)
+    assert np.all((fill > -0.011) & (fill < 0.111))
+
+
+def test_default_gravity_turns_with_camera_pitch_and_frame_is_a_rotation():
+    g = domain.world_gravity(None, 30.0)
+    np.testing.assert_allclose(g, 9.81 * np.array([0, math.cos(math.radians(30)), math.sin(math.radians(30))]))
+    Q = domain.simulation_rotation(g / np.linalg.norm(g))
+    np.testing.assert_allclose(Q @ Q.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(Q) == pytest.approx(1.0)
+    np.testing.assert_allclose(Q @ g, [0, -9.81, 0], atol=1e-12)  # gravity is -y in the simulation frame
+    np.testing.assert_allclose(domain.world_gravity([1.0, 2.0, 3.0], 30.0), [1, 2, 3])
+
+
+def test_regions_are_in_the_objects_normalised_box():
+    x = np.array([[0.0, 0, 0], [1.0, 2, 4], [0.5, 1, 2], [0.9, 0.1, 0.1]])
+    assert region_members("all", x).all()
+    np.testing.assert_array_equal(region_members(SphereRegion(sphere=[0.5, 0.5, 0.5, 0.1]), x),
+                                  [False, False, True, False])
+
+
+def test_empty_region_and_blow_up_are_input_errors():
+    means, oid = boxes(((0, 0, 0), (0.1, 0.1, 0.1)), spacing=0.01)
+    with pytest.raises(InputError, match=r"conditions\[0\]\.region"):
+        Simulation(PhysicsConfig(conditions=[{"type": "fixed", "region": {"sphere": [2, 2, 2, 0.1]}}]),
+                   [M.Jelly()], means, oid)
+    # a substep 50x beyond the CFL bound blows up; the message names frame, object and fix
+    sim = Simulation(PhysicsConfig(duration_s=0.5, fps=10, grid=16, dt=0.01), [M.Jelly(youngs_modulus=1e6)],
+                     means, oid)
+    with pytest.raises(InputError, match=r"objects\[0\]\.material.*frame \d+.*jelly.*physics\.dt"):
+        sim.run()
+
+
+def test_cfl_substep_shrinks_with_stiffness_and_speed():
+    soft, stiff = M.Jelly(youngs_modulus=1e4), M.Jelly(youngs_modulus=1e6)
+    assert domain.cfl_substep(0.01, [stiff], 0.0) == pytest.approx(domain.cfl_substep(0.01, [soft], 0.0) / 10)
+    assert domain.cfl_substep(0.01, [soft], 10.0) < domain.cfl_substep(0.01, [soft], 0.0)
+
+
+def make_gaussians(path, means, object_id):
+    H, W = 120, 160
+    f = H / 2 / math.tan(math.radians(20))
+    G = len(means)
+    photo = np.full((H, W, 3), 128, np.uint8)
+    write_artifact(path, GaussiansArtifact(
+        K=np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1]]), world_to_camera=np.eye(4), width=W, height=H,
+        means=means, scales=np.full((G, 3), 0.004), rotations=np.tile([1.0, 0, 0, 0], (G, 1)),
+        opacities=np.ones(G), colors=np.full((G, 3), 0.5), object_id=object_id, photo=photo,
+        mask=np.zeros((H, W)), background=photo, depth_prior=np.zeros((H, W)), loss=np.zeros((0, 1)),
+        loss_terms=["l1"]), created_by="test", config_hash="0")
+
+
+def test_program_writes_trajectories_and_setup_png(tmp_path):
+    """pm-simulate end to end on two small objects: the artifact has DESIGN.md's layout (Gaussians first,
+    frame 0 at rest with F = I), and setup.png is the photograph's size."""
+    cv2.imwrite(str(tmp_path / "photo.png"), np.full((120, 160, 3), 128, np.uint8))
+    (tmp_path / "scene.yaml").write_text(
+        "image: photo.png\n"
+        "objects:\n  - {size_m: 0.08, material: {preset: jelly}}\n  - {size_m: 0.08, material: {preset: metal}}\n"
+        "physics:\n  duration_s: 0.1\n  fps: 20\n  grid: 16\n  ground: {type: slip}\n"
+        "  conditions:\n    - {type: force, object: 1, region: {box: [0, 0, 0, 1, 0.5, 1]}, force: [0, -1, 0],"
+        " start_s: 0, end_s: 0.05}\n")
+    means, oid = boxes(((-0.1, 0, 0.5), (-0.02, 0.08, 0.58)), ((0.02, 0, 0.5), (0.1, 0.08, 0.58)), spacing=0.01)
+    make_gaussians(tmp_path / "gaussians.h5", means, oid)
+    out = tmp_path / "run" / "trajectories.h5"
+    cli.main(["--scene", str(tmp_path / "scene.yaml"), "--gaussians", str(tmp_path / "gaussians.h5"),
+              "--out", str(out), "--device", "cpu"])
+    tr = read_artifact(out, TrajectoriesArtifact)
+    G = len(means)
+    assert tr.positions.shape[0] == 3 and tr.F.shape == (3, G, 3, 3)
+    np.testing.assert_allclose(tr.positions[0, :G], means, atol=1e-6)
+    np.testing.assert_allclose(tr.rest_positions, tr.positions[0], atol=1e-6)
+    np.testing.assert_allclose(tr.F[0], np.broadcast_to(np.eye(3), (G, 3, 3)), atol=1e-6)
+    assert tr.is_gaussian[:G].all() and not tr.is_gaussian[G:].any()
+    assert set(np.unique(tr.material_id)) == {M.PRESETS.index("jelly"), M.PRESETS.index("metal")}
+    assert tr.masses[tr.object_id == 1].sum() == pytest.approx(3000 * 0.08 ** 3, rel=0.25)
+    assert tr.substeps[1] >= 1 and np.all(np.isfinite(tr.kinetic_energy))
+    setup = cv2.imread(str(tmp_path / "run" / "setup.png"))
+    assert setup.shape == (120, 160, 3)
+
+
+def test_program_refuses_a_bad_scene_with_exit_code_2(tmp_path, capsys):
+    (tmp_path / "scene.yaml").write_text("image: missing.png\n")
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["--scene", str(tmp_path / "scene.yaml"), "--gaussians", str(tmp_path / "g.h5"),
+                  "--out", str(tmp_path / "t.h5"), "--device", "cpu"])
+    assert exit_info.value.code == 2
+    assert "image" in capsys.readouterr().err
