@@ -15,7 +15,9 @@ from .background import inpaint_background
 from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
 from .geometry import intrinsics_from_fov, working_size
 from .lift import Gaussians, lift_object
+from .optimize import Settings, optimize
 from .segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
+from .views import extra_view, input_view
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -82,3 +84,17 @@ def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depth
         parts.append(lift_object(small, K_work, photo_work, k))
         log.info("object %d: %d initial Gaussians", k, len(parts[-1]))
     return Gaussians.concatenate(parts)
+
+
+def optimize_scene(scene: Scene, prepared: Prepared, device: str = "cpu",
+                   settings: Optional[Settings] = None) -> tuple[Gaussians, np.ndarray]:
+    """Optimise the initial Gaussians on the input view (colour, hard depth) and the extra views (hard depth)."""
+    settings = settings or Settings(iterations=scene.reconstruct.iterations)
+    resolution = scene.reconstruct.resolution
+    views = [input_view(prepared.photo, prepared.labels, prepared.depth_prior, prepared.K, resolution, device)]
+    views += [extra_view(v.image, v.azimuth_deg, f"reconstruct.extra_views[{i}]", prepared.initial,
+                         scene.camera.fov_deg, resolution, device)
+              for i, v in enumerate(scene.reconstruct.extra_views)]
+    log.info("optimising %d Gaussians for %d iterations at %dx%d on %d view(s)", len(prepared.initial),
+             settings.iterations, views[0].camera.width, views[0].camera.height, len(views))
+    return optimize(prepared.initial, views, settings, device)

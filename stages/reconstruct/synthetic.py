@@ -1,0 +1,96 @@
+"""A known 3D shape photographed by a pinhole camera: the ground truth for tests and benchmarks/quality.py.
+
+The shape is a capsule (a cylinder with hemispherical caps) tilted in the
+image plane, textured with coloured stripes along its axis. Ray casting is
+sphere tracing of its signed distance, in float64 numpy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from .geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays
+
+
+@dataclass(frozen=True)
+class Capsule:
+    """Axis from ``centre - half_axis`` to ``centre + half_axis`` (metres), radius ``radius``."""
+
+    centre: np.ndarray
+    half_axis: np.ndarray
+    radius: float
+
+    @staticmethod
+    def tilted(distance: float = 0.6, size_m: float = 0.25, radius: float = 0.05, tilt_deg: float = 20.0) -> "Capsule":
+        """A capsule ``size_m`` long overall, ``distance`` in front of the camera, its axis turned in the image plane."""
+        half = size_m / 2 - radius
+        t = math.radians(tilt_deg)
+        return Capsule(np.array([0.0, 0.0, distance]), half * np.array([math.cos(t), math.sin(t), 0.0]), radius)
+
+    @property
+    def size_m(self) -> float:
+        """Largest extent: the overall length."""
+        return 2 * (float(np.linalg.norm(self.half_axis)) + self.radius)
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (...,) in metres of points (...,3): negative inside."""
+        rel = points - self.centre
+        axis_sq = self.half_axis @ self.half_axis
+        s = np.clip((rel @ self.half_axis) / axis_sq, -1.0, 1.0)
+        return np.linalg.norm(rel - s[..., None] * self.half_axis, axis=-1) - self.radius
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        """sRGB in [0,1] (...,3): stripes along the axis and a tint around it, so every view has texture."""
+        rel = points - self.centre
+        along = (rel @ self.half_axis) / (self.half_axis @ self.half_axis)
+        stripes = 0.5 + 0.5 * np.sin(along * 3 * math.pi)
+        around = 0.5 + 0.5 * rel[..., 1] / self.radius
+        return np.stack([0.25 + 0.7 * stripes, 0.2 + 0.5 * np.clip(around, 0, 1), 0.8 - 0.6 * stripes], axis=-1)
+
+
+@dataclass
+class Photograph:
+    """What a camera sees of the capsule: RGB u8 (H,W,3) over a grey backdrop, mask (H,W) bool, and the
+    distance along the ray (H,W) to the surface in metres (NaN off it)."""
+
+    rgb: np.ndarray
+    mask: np.ndarray
+    distance: np.ndarray
+
+
+def photograph(shape: Capsule, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,
+               steps: int = 96) -> Photograph:
+    """Ray-cast ``shape`` from the camera (pinhole, DESIGN.md conventions)."""
+    rotation, translation = world_to_camera[:3, :3], world_to_camera[:3, 3]
+    origin = -rotation.T @ translation
+    directions = pixel_rays(K, height, width) @ rotation  # camera -> world: R^T d, row vectors
+    t = np.zeros((height, width))
+    for _ in range(steps):
+        t += np.maximum(shape.signed_distance(origin + directions * t[..., None]), 0)
+    points = origin + directions * t[..., None]
+    hit = np.abs(shape.signed_distance(points)) < 1e-5
+    rgb = np.where(hit[..., None], shape.color(points), 0.45)
+    return Photograph((rgb * 255).round().astype(np.uint8), hit, np.where(hit, t, np.nan))
+
+
+def write_scene(folder: Path, shape: Capsule, fov_deg: float = 40.0, width: int = 256, height: int = 192,
+                iterations: int = 600) -> Path:
+    """A scene folder (scene.yaml, photo.png, mask.png) of ``shape`` seen by the input camera; returns scene.yaml."""
+    folder.mkdir(parents=True, exist_ok=True)
+    photo = photograph(shape, intrinsics_from_fov(fov_deg, width, height), np.eye(4), width, height)
+    cv2.imwrite(str(folder / "photo.png"), cv2.cvtColor(photo.rgb, cv2.COLOR_RGB2BGR))
+    cv2.imwrite(str(folder / "mask.png"), photo.mask.astype(np.uint8) * 255)
+    (folder / "scene.yaml").write_text(
+        f"image: photo.png\ncamera: {{fov_deg: {fov_deg}}}\n"
+        f"objects:\n  - mask: mask.png\n    size_m: {shape.size_m}\n"
+        f"reconstruct: {{resolution: {max(width, height)}, iterations: {iterations}}}\n")
+    return folder / "scene.yaml"
+
+
+def side_view(shape: Capsule, azimuth_deg: float = 90.0) -> np.ndarray:
+    """world_to_camera (4,4) of the input camera orbited about the capsule's centre."""
+    return orbit_world_to_camera(shape.centre, azimuth_deg)
