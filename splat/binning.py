@@ -15,6 +15,9 @@ TILE_SIZE = wp.constant(16)
 """Tile side in pixels."""
 ALPHA_MIN = wp.constant(1.0 / 255.0)
 """A Gaussian reaches exactly the pixels where its alpha is at least this."""
+POWER_MARGIN = wp.constant(1e-3)
+"""Slack on the exponent -1/2 d^T Sigma^-1 d wherever a cheap test stands in for alpha >= 1/255
+(tile binning, the compositing pre-test): far above float32 rounding, so they over-cover, never miss."""
 
 
 @wp.func
@@ -30,18 +33,25 @@ def pixel_span(centre: float, half_extent: float, size: int) -> wp.vec2i:
 
 
 @wp.func
-def tile_rect(mean2d: wp.vec2, conic: wp.vec3, opacity: float, width: int, height: int) -> wp.vec4i:
-    """Tiles (x0, y0, x1, y1), end exclusive, covering every pixel the Gaussian reaches.
-
-    alpha >= 1/255 inside the ellipse d^T Sigma^-1 d <= 2 ln(255 opacity), whose
-    bounding box has half-widths sqrt(2 ln(255 opacity) Sigma_00) and ..._11: that is
-    the design's extent (sqrt(2 ln(255 opacity)) times the std) taken per axis, the
-    tightest box that still covers every reached pixel.
-    """
+def extent_squared(conic: wp.vec3, opacity: float) -> float:
+    """k^2 with alpha >= 1/255 exactly inside the ellipse d^T Sigma^-1 d <= k^2 = 2 ln(255 opacity)
+    (plus the margin); -1 when the Gaussian reaches nothing or is culled (zero conic)."""
     det = conic[0] * conic[2] - conic[1] * conic[1]
     if opacity < ALPHA_MIN or det <= 0.0 or conic[0] <= 0.0:
+        return -1.0
+    return 2.0 * wp.log(255.0 * opacity) + 2.0 * POWER_MARGIN
+
+
+@wp.func
+def tile_rect(mean2d: wp.vec2, conic: wp.vec3, extent_sq: float, width: int, height: int) -> wp.vec4i:
+    """Tiles (x0, y0, x1, y1), end exclusive, whose pixels the ellipse's bounding box covers.
+
+    The box has half-widths sqrt(k^2 Sigma_00) and sqrt(k^2 Sigma_11): the design's
+    extent (k times the standard deviation) taken per axis.
+    """
+    if extent_sq < 0.0:
         return wp.vec4i(0)
-    extent_sq = 2.0 * wp.log(255.0 * opacity)
+    det = conic[0] * conic[2] - conic[1] * conic[1]
     cols = pixel_span(mean2d[0], wp.sqrt(extent_sq * conic[2] / det), width)
     rows = pixel_span(mean2d[1], wp.sqrt(extent_sq * conic[0] / det), height)
     if cols[0] >= cols[1] or rows[0] >= rows[1]:
@@ -50,14 +60,49 @@ def tile_rect(mean2d: wp.vec2, conic: wp.vec3, opacity: float, width: int, heigh
                     (cols[1] - 1) // TILE_SIZE + 1, (rows[1] - 1) // TILE_SIZE + 1)
 
 
+@wp.func
+def edge_minimum(conic_along: float, conic_cross: float, conic_fixed: float, fixed: float, lo: float, hi: float) -> float:
+    """min over t in [lo, hi] of conic_fixed f^2 + 2 conic_cross f t + conic_along t^2, with f = ``fixed``."""
+    t = wp.clamp(-conic_cross * fixed / conic_along, lo, hi)
+    return conic_fixed * fixed * fixed + 2.0 * conic_cross * fixed * t + conic_along * t * t
+
+
+@wp.func
+def ellipse_meets_tile(mean2d: wp.vec2, conic: wp.vec3, extent_sq: float, tx: int, ty: int,
+                       width: int, height: int) -> bool:
+    """Whether any pixel centre of tile (tx, ty) lies in the ellipse d^T Sigma^-1 d <= extent_sq.
+
+    Exact for the box spanned by the tile's pixel centres: the convex quadratic's
+    minimum over the box is 0 when the mean is inside, else on one of its edges.
+    Tiles of the bounding box that the ellipse misses (elongated or tilted
+    Gaussians) are dropped, so fewer tile-Gaussian pairs are composited.
+    """
+    x0 = float(tx * TILE_SIZE) + 0.5 - mean2d[0]
+    x1 = float(wp.min((tx + 1) * TILE_SIZE, width)) - 0.5 - mean2d[0]
+    y0 = float(ty * TILE_SIZE) + 0.5 - mean2d[1]
+    y1 = float(wp.min((ty + 1) * TILE_SIZE, height)) - 0.5 - mean2d[1]
+    if x0 <= 0.0 and x1 >= 0.0 and y0 <= 0.0 and y1 >= 0.0:
+        return True
+    a, b, c = conic[0], conic[1], conic[2]
+    q = wp.min(wp.min(edge_minimum(c, b, a, x0, y0, y1), edge_minimum(c, b, a, x1, y0, y1)),
+               wp.min(edge_minimum(a, b, c, y0, x0, x1), edge_minimum(a, b, c, y1, x0, x1)))
+    return q <= extent_sq
+
+
 @wp.kernel
 def count_tiles_kernel(
     means2d: wp.array(dtype=wp.vec2), conics: wp.array(dtype=wp.vec3), opacities: wp.array(dtype=float),
     width: int, height: int, counts: wp.array(dtype=wp.int64),
 ):
     i = wp.tid()
-    r = tile_rect(means2d[i], conics[i], opacities[i], width, height)
-    counts[i] = wp.int64((r[2] - r[0]) * (r[3] - r[1]))
+    extent_sq = extent_squared(conics[i], opacities[i])
+    r = tile_rect(means2d[i], conics[i], extent_sq, width, height)
+    count = wp.int64(0)
+    for ty in range(r[1], r[3]):
+        for tx in range(r[0], r[2]):
+            if ellipse_meets_tile(means2d[i], conics[i], extent_sq, tx, ty, width, height):
+                count += wp.int64(1)
+    counts[i] = count
 
 
 @wp.kernel
@@ -68,14 +113,16 @@ def write_tile_keys_kernel(
 ):
     """Key of an intersection: tile * G + depth rank, so one sort orders by tile, then depth, then index."""
     i = wp.tid()
-    r = tile_rect(means2d[i], conics[i], opacities[i], width, height)
+    extent_sq = extent_squared(conics[i], opacities[i])
+    r = tile_rect(means2d[i], conics[i], extent_sq, width, height)
     tiles_x = (width + TILE_SIZE - 1) // TILE_SIZE
     n = offsets[i]
     num_gaussians = wp.int64(depth_ranks.shape[0])
     for ty in range(r[1], r[3]):
         for tx in range(r[0], r[2]):
-            keys[n] = wp.int64(ty * tiles_x + tx) * num_gaussians + depth_ranks[i]
-            n += wp.int64(1)
+            if ellipse_meets_tile(means2d[i], conics[i], extent_sq, tx, ty, width, height):
+                keys[n] = wp.int64(ty * tiles_x + tx) * num_gaussians + depth_ranks[i]
+                n += wp.int64(1)
 
 
 @dataclass

@@ -19,7 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import torch
 import warp as wp
 
-from .binning import ALPHA_MIN, TILE_SIZE, TileBins
+from .binning import ALPHA_MIN, POWER_MARGIN, TILE_SIZE, TileBins
 
 ALPHA_MAX = wp.constant(0.99)
 """Alpha is clamped to this so that one Gaussian never hides everything behind it."""
@@ -31,11 +31,11 @@ CPU_THREADS = max(1, min(os.cpu_count() or 1, 16))
 
 
 @wp.func
-def splat_weight(mean2d: wp.vec2, conic: wp.vec3, px: float, py: float) -> float:
-    """The Gaussian's value exp(-1/2 d^T Sigma^-1 d) at pixel centre (px, py)."""
+def splat_power(mean2d: wp.vec2, conic: wp.vec3, px: float, py: float) -> float:
+    """The Gaussian's exponent -1/2 d^T Sigma^-1 d at pixel centre (px, py)."""
     dx = mean2d[0] - px
     dy = mean2d[1] - py
-    return wp.exp(-0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) - conic[1] * dx * dy)
+    return -0.5 * (conic[0] * dx * dx + conic[2] * dy * dy) - conic[1] * dx * dy
 
 
 @wp.func
@@ -55,8 +55,8 @@ def composite_kernels(channels: int):
     def composite_forward(
         tile_ids: wp.array(dtype=wp.int32), tile_offsets: wp.array(dtype=wp.int32), tiles_x: int,
         means2d: wp.array(dtype=wp.vec2), conics: wp.array(dtype=wp.vec3), opacities: wp.array(dtype=float),
-        distances: wp.array(dtype=float), features: wp.array(dtype=vec_c), background: vec_c,
-        out_features: wp.array2d(dtype=vec_c), out_alpha: wp.array2d(dtype=float),
+        power_floors: wp.array(dtype=float), distances: wp.array(dtype=float), features: wp.array(dtype=vec_c),
+        background: vec_c, out_features: wp.array2d(dtype=vec_c), out_alpha: wp.array2d(dtype=float),
         out_depth: wp.array2d(dtype=float), out_transmittance: wp.array2d(dtype=float),
         out_end: wp.array2d(dtype=wp.int32),
     ):
@@ -73,7 +73,10 @@ def composite_kernels(channels: int):
         color = vec_c()
         depth = float(0.0)
         for n in range(tile_offsets[tile], tile_offsets[tile + 1]):
-            alpha = wp.min(ALPHA_MAX, opacities[n] * splat_weight(means2d[n], conics[n], px, py))
+            power = splat_power(means2d[n], conics[n], px, py)
+            if power < power_floors[n]:  # surely below 1/255: skip the exp
+                continue
+            alpha = wp.min(ALPHA_MAX, opacities[n] * wp.exp(power))
             if alpha < ALPHA_MIN:
                 continue
             next_transmittance = transmittance * (1.0 - alpha)
@@ -94,8 +97,8 @@ def composite_kernels(channels: int):
     def composite_backward(
         tile_ids: wp.array(dtype=wp.int32), tile_offsets: wp.array(dtype=wp.int32), tiles_x: int,
         means2d: wp.array(dtype=wp.vec2), conics: wp.array(dtype=wp.vec3), opacities: wp.array(dtype=float),
-        distances: wp.array(dtype=float), features: wp.array(dtype=vec_c), background: vec_c,
-        transmittances: wp.array2d(dtype=float), ends: wp.array2d(dtype=wp.int32),
+        power_floors: wp.array(dtype=float), distances: wp.array(dtype=float), features: wp.array(dtype=vec_c),
+        background: vec_c, transmittances: wp.array2d(dtype=float), ends: wp.array2d(dtype=wp.int32),
         grad_out_features: wp.array2d(dtype=vec_c), grad_out_alpha: wp.array2d(dtype=float),
         grad_out_depth: wp.array2d(dtype=float),
         grad_means2d: wp.array(dtype=wp.vec2), grad_conics: wp.array(dtype=wp.vec3),
@@ -120,7 +123,10 @@ def composite_kernels(channels: int):
         start = tile_offsets[tile_ids[t]]
         while n > start:
             n -= 1
-            weight_2d = splat_weight(means2d[n], conics[n], px, py)
+            power = splat_power(means2d[n], conics[n], px, py)
+            if power < power_floors[n]:
+                continue
+            weight_2d = wp.exp(power)
             raw_alpha = opacities[n] * weight_2d
             alpha = wp.min(ALPHA_MAX, raw_alpha)
             if alpha < ALPHA_MIN:
@@ -191,6 +197,8 @@ class _CompositeGaussians(torch.autograd.Function):
         sorted_inputs = [wp.from_torch(means2d[ids].contiguous(), dtype=wp.vec2),
                          wp.from_torch(conics[ids].contiguous(), dtype=wp.vec3),
                          wp.from_torch(opacities[ids].contiguous()),
+                         # alpha >= 1/255 needs power >= -ln(255 opacity); binned Gaussians have opacity >= 1/255.
+                         wp.from_torch((-torch.log(255.0 * opacities[ids]) - POWER_MARGIN).contiguous()),
                          wp.from_torch(distances[ids].contiguous()),
                          wp.from_torch(features[ids].contiguous(), dtype=vec_c),
                          vec_c(*background.tolist())]
