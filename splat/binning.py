@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import torch
 import warp as wp
 
+from .launch import launch
+
 TILE_SIZE = wp.constant(16)
 """Tile side in pixels."""
 ALPHA_MIN = wp.constant(1.0 / 255.0)
@@ -157,14 +159,13 @@ def bin_gaussians(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.
         depths: (G,) camera-space z, the sort key; width, height: image size in px.
     """
     G, device = means2d.shape[0], means2d.device
-    wp_device = wp.device_from_torch(device)
     tiles_x, tiles_y = -(-width // TILE_SIZE), -(-height // TILE_SIZE)
     geometry = [wp.from_torch(means2d.detach().contiguous(), dtype=wp.vec2),
                 wp.from_torch(conics.detach().contiguous(), dtype=wp.vec3),
                 wp.from_torch(opacities.detach().contiguous()), width, height]
 
     counts = torch.empty(G, dtype=torch.int64, device=device)
-    wp.launch(count_tiles_kernel, dim=G, inputs=geometry, outputs=[wp.from_torch(counts)], device=wp_device)
+    launch(count_tiles_kernel, G, inputs=geometry, outputs=[wp.from_torch(counts)], device=device)
     ends = torch.cumsum(counts, 0)
     num_intersections = int(ends[-1]) if G else 0
 
@@ -173,9 +174,8 @@ def bin_gaussians(means2d: torch.Tensor, conics: torch.Tensor, opacities: torch.
     depth_ranks[depth_order] = torch.arange(G, device=device)
 
     keys = torch.empty(num_intersections, dtype=torch.int64, device=device)
-    wp.launch(write_tile_keys_kernel, dim=G,
-              inputs=[*geometry, wp.from_torch(depth_ranks), wp.from_torch(ends - counts)],
-              outputs=[wp.from_torch(keys)], device=wp_device)
+    launch(write_tile_keys_kernel, G, inputs=[*geometry, wp.from_torch(depth_ranks), wp.from_torch(ends - counts)],
+           outputs=[wp.from_torch(keys)], device=device)
     keys = torch.sort(keys).values
 
     tiles = keys // max(G, 1)

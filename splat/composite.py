@@ -20,6 +20,7 @@ import torch
 import warp as wp
 
 from .binning import ALPHA_MIN, POWER_MARGIN, TILE_SIZE, TileBins
+from .launch import launch
 
 ALPHA_MAX = wp.constant(0.99)
 """Alpha is clamped to this so that one Gaussian never hides everything behind it."""
@@ -165,7 +166,6 @@ def launch_over_tiles(kernel, bins: TileBins, inputs: list, outputs: list, devic
     CPU_THREADS Python threads that launch concurrently, so each thread gets a
     similar share of intersections.
     """
-    wp_device = wp.device_from_torch(device)
     pixels_per_tile = TILE_SIZE * TILE_SIZE
     if device.type != "cpu" or CPU_THREADS == 1:
         tile_ids = torch.arange(bins.num_tiles, dtype=torch.int32, device=device)
@@ -174,15 +174,15 @@ def launch_over_tiles(kernel, bins: TileBins, inputs: list, outputs: list, devic
         by_load = torch.argsort(bins.tile_loads(), descending=True, stable=True).to(torch.int32)
         shares = [by_load[i::CPU_THREADS] for i in range(min(CPU_THREADS, bins.num_tiles))]
 
-    def launch(tile_ids: torch.Tensor) -> None:
-        wp.launch(kernel, dim=(tile_ids.shape[0], pixels_per_tile),
-                  inputs=[wp.from_torch(tile_ids.contiguous()), *inputs], outputs=outputs, device=wp_device)
+    def launch_share(tile_ids: torch.Tensor) -> None:
+        launch(kernel, (tile_ids.shape[0], pixels_per_tile), inputs=[wp.from_torch(tile_ids.contiguous()), *inputs],
+               outputs=outputs, device=device)
 
     if len(shares) == 1:
-        launch(shares[0])
+        launch_share(shares[0])
     else:
-        wp.load_module(kernel.module, device=wp_device)  # compile once, not once per thread
-        for future in [_cpu_pool().submit(launch, share) for share in shares]:
+        wp.load_module(kernel.module, device="cpu")  # compile once, not once per thread
+        for future in [_cpu_pool().submit(launch_share, share) for share in shares]:
             future.result()
 
 

@@ -13,6 +13,7 @@ import torch
 import warp as wp
 
 from .camera import Camera
+from .launch import launch
 
 NEAR_PLANE = wp.constant(0.01)
 """Gaussians whose mean has camera-space z below this are culled (metres)."""
@@ -101,6 +102,11 @@ class _CameraArgs:
         return [wp.mat33(), wp.vec3(), wp.vec2(), wp.vec2(), wp.vec2(), wp.vec2()]
 
 
+def _kernel_inputs(means: torch.Tensor, covariances: torch.Tensor, camera_args: _CameraArgs) -> list:
+    return [wp.from_torch(means.detach(), dtype=wp.vec3), wp.from_torch(covariances.detach(), dtype=wp.mat33),
+            *camera_args.as_list()]
+
+
 class _ProjectGaussians(torch.autograd.Function):
     @staticmethod
     def forward(ctx, means: torch.Tensor, covariances: torch.Tensor, camera: Camera):
@@ -110,12 +116,10 @@ class _ProjectGaussians(torch.autograd.Function):
         distances = torch.zeros(G, device=device)
         depths = torch.zeros(G, device=device)
         camera_args = _CameraArgs.of(camera)
-        inputs = [wp.from_torch(means.detach(), dtype=wp.vec3),
-                  wp.from_torch(covariances.detach(), dtype=wp.mat33), *camera_args.as_list()]
+        inputs = _kernel_inputs(means, covariances, camera_args)
         outputs = [wp.from_torch(means2d, dtype=wp.vec2), wp.from_torch(conics, dtype=wp.vec3),
                    wp.from_torch(distances), wp.from_torch(depths)]
-        wp.launch(project_gaussians_kernel, dim=G, inputs=inputs, outputs=outputs,
-                  device=wp.device_from_torch(device))
+        launch(project_gaussians_kernel, G, inputs=inputs, outputs=outputs, device=device)
         ctx.save_for_backward(means, covariances)
         ctx.camera_args = camera_args
         ctx.mark_non_differentiable(depths)
@@ -128,19 +132,19 @@ class _ProjectGaussians(torch.autograd.Function):
         grad_means = torch.zeros_like(means)
         grad_covariances = torch.zeros_like(covariances)
         # The adjoint replays the forward pass; its outputs go to scratch arrays.
-        scratch = [wp.zeros(G, dtype=t, device=wp.device_from_torch(device))
-                   for t in (wp.vec2, wp.vec3, float, float)]
-        wp.launch(
-            project_gaussians_kernel, dim=G,
-            inputs=[wp.from_torch(means.detach(), dtype=wp.vec3),
-                    wp.from_torch(covariances.detach(), dtype=wp.mat33), *ctx.camera_args.as_list()],
+        scratch = [wp.from_torch(torch.empty(G, 2, device=device), dtype=wp.vec2),
+                   wp.from_torch(torch.empty(G, 3, device=device), dtype=wp.vec3),
+                   wp.from_torch(torch.empty(G, device=device)), wp.from_torch(torch.empty(G, device=device))]
+        launch(
+            project_gaussians_kernel, G,
+            inputs=_kernel_inputs(means, covariances, ctx.camera_args),
             outputs=scratch,
             adj_inputs=[wp.from_torch(grad_means, dtype=wp.vec3), wp.from_torch(grad_covariances, dtype=wp.mat33),
                         *_CameraArgs.zeros()],
             adj_outputs=[wp.from_torch(grad_means2d.contiguous(), dtype=wp.vec2),
                          wp.from_torch(grad_conics.contiguous(), dtype=wp.vec3),
                          wp.from_torch(grad_distances.contiguous()), None],
-            adjoint=True, device=wp.device_from_torch(device),
+            adjoint=True, device=device,
         )
         return grad_means, grad_covariances, None
 
