@@ -19,11 +19,6 @@ def model_size(height: int, width: int, target_width: int) -> Tuple[int, int]:
     return max(64, round(height * scale / 64) * 64), max(64, round(target_width / 64) * 64)
 
 
-def resize_frames(frames: np.ndarray, size: Tuple[int, int], interpolation=cv2.INTER_AREA) -> np.ndarray:
-    """Resize (T, h, w, ...) frames to ``size`` = (height, width)."""
-    return np.stack([cv2.resize(f, (size[1], size[0]), interpolation=interpolation) for f in frames])
-
-
 def inverse_depth_control(depth: np.ndarray, alpha: np.ndarray) -> np.ndarray:
     """Normalised inverse depth (T, h, w) in [0, 1] from the render's alpha-weighted depth (Eq. 2).
 

@@ -120,18 +120,18 @@ def resolve_model_paths(models: DiffusionModels, scene_file: Path) -> Dict[str, 
     return found
 
 
-def load_components(models: DiffusionModels, scene_file: Path, device: str,
-                    lora_dir: Optional[Path] = None) -> Components:
-    """Load SD 2.1, the depth and Canny ControlNets and optionally a LoRA, for inference on ``device``.
+def load_components(models: DiffusionModels, scene_file: Path, device: str, lora_dir: Optional[Path] = None,
+                    dtype: Optional[torch.dtype] = None) -> Components:
+    """Load SD 2.1, the depth and Canny ControlNets and optionally a LoRA onto ``device``.
 
-    Half precision on CUDA, single on CPU. The VAE stays in single precision: its
-    decoder overflows float16 at 768 px.
+    ``dtype`` defaults to half precision on CUDA, single on CPU. The VAE stays in single
+    precision: its decoder overflows float16 at 768 px.
     """
     from diffusers import AutoencoderKL, ControlNetModel, DDIMScheduler, MultiControlNetModel, UNet2DConditionModel
     from transformers import AutoTokenizer, CLIPTextModel
 
     paths = resolve_model_paths(models, scene_file)
-    dtype = torch.float16 if device.startswith("cuda") else torch.float32
+    dtype = dtype or (torch.float16 if device.startswith("cuda") else torch.float32)
     sd = paths["stable_diffusion"]
     log.info("loading Stable Diffusion from %s, ControlNets from %s and %s", sd, paths["controlnet_depth"],
              paths["controlnet_canny"])
