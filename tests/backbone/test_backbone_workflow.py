@@ -1,7 +1,6 @@
 """End to end: the Snakemake workflow on a tiny scene, what reruns after an edit, and the programs' exits."""
 import os
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -71,26 +70,32 @@ def test_second_run_does_nothing(finished_run):
     assert planned_jobs(finished_run) == {}
 
 
-def edited_copy(finished_run: Path, tmp_path: Path, edit) -> Path:
-    workdir = tmp_path / "w"
-    shutil.copytree(finished_run, workdir, symlinks=True)
+def jobs_after_edit(workdir: Path, edit) -> dict:
+    """The dry-run plan after editing the scene in place; the file is restored afterwards.
+
+    In place, because Snakemake keys the params it recorded by output path: a copied
+    results folder would have none to compare with.
+    """
     path = workdir / "scenes" / "tiny" / "scene.yaml"
-    scene = yaml.safe_load(path.read_text())
+    original = path.read_text()
+    scene = yaml.safe_load(original)
     edit(scene)
     path.write_text(yaml.safe_dump(scene, sort_keys=False))
-    return workdir
+    try:
+        return planned_jobs(workdir)
+    finally:
+        path.write_text(original)
 
 
 @pytest.mark.slow
-def test_editing_physics_reruns_all_but_reconstruct(finished_run, tmp_path):
-    workdir = edited_copy(finished_run, tmp_path, lambda s: s["physics"].update(duration_s=0.125))
-    assert planned_jobs(workdir) == {"simulate": 1, "render": 1, "enhance": 1}
+def test_editing_physics_reruns_all_but_reconstruct(finished_run):
+    plan = jobs_after_edit(finished_run, lambda s: s["physics"].update(duration_s=0.125))
+    assert plan == {"simulate": 1, "render": 1, "enhance": 1}
 
 
 @pytest.mark.slow
-def test_editing_enhance_reruns_only_enhance(finished_run, tmp_path):
-    workdir = edited_copy(finished_run, tmp_path, lambda s: s["enhance"].update(confidence_threshold=0.7))
-    assert planned_jobs(workdir) == {"enhance": 1}
+def test_editing_enhance_reruns_only_enhance(finished_run):
+    assert jobs_after_edit(finished_run, lambda s: s["enhance"].update(confidence_threshold=0.7)) == {"enhance": 1}
 
 
 @pytest.mark.slow
