@@ -15,9 +15,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from schemas import InputError
-
 from .geometry import pixel_rays
+from .local_model import require_model_folder
 
 
 def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
@@ -134,12 +133,7 @@ class DptDepth:
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
         model_dir = Path(model_dir)
-        for name in ("config.json", "preprocessor_config.json"):
-            if not (model_dir / name).is_file():
-                raise InputError(model_dir / name, None, "depth model file is missing",
-                                 f"put a transformers depth-estimation model (save_pretrained of the model and its "
-                                 f"image processor, e.g. Intel/dpt-hybrid-midas) in {model_dir}, or use the "
-                                 f"default inflation prior")
+        require_model_folder(model_dir, "depth-estimation", "Intel/dpt-hybrid-midas", "use the default inflation prior")
         self.torch, self.device = torch, device
         self.processor = AutoImageProcessor.from_pretrained(model_dir, local_files_only=True)
         self.model = AutoModelForDepthEstimation.from_pretrained(model_dir, local_files_only=True).to(device).eval()

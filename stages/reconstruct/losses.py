@@ -70,7 +70,10 @@ def hard_depth_loss(rendered: torch.Tensor, prior: torch.Tensor, valid: torch.Te
         scalar; zero (without gradient) when no patch fits.
     """
     size = int(rng.integers(patch_range[0], patch_range[1] + 1))
-    offset = (int(rng.integers(0, size)), int(rng.integers(0, size)))
+    height, width = valid.shape
+    if min(height, width) < size:
+        return rendered.sum() * 0
+    offset = (int(rng.integers(0, min(size, height - size + 1))), int(rng.integers(0, min(size, width - size + 1))))
     keep = _patches(valid.float(), size, offset).min(dim=1).values > 0.5
     if keep.sum() < 1:
         return rendered.sum() * 0

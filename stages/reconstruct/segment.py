@@ -16,6 +16,8 @@ from scipy import ndimage
 
 from schemas import InputError
 
+from .local_model import require_model_folder
+
 log = logging.getLogger("physmotion.reconstruct")
 
 GRABCUT_ITERATIONS = 5
@@ -124,7 +126,7 @@ class SamSegmenter:
 
     The folder is what ``SamModel.save_pretrained`` + ``SamProcessor.save_pretrained``
     write (e.g. a download of facebook/sam-vit-base): config.json, the weights and
-    preprocessor_config.json. Nothing is fetched from the network.
+    the processor's config. Nothing is fetched from the network.
     """
 
     def __init__(self, model_dir: Path | str, device: str = "cpu"):
@@ -132,11 +134,7 @@ class SamSegmenter:
         from transformers import SamModel, SamProcessor
 
         model_dir = Path(model_dir)
-        for name in ("config.json", "preprocessor_config.json"):
-            if not (model_dir / name).is_file():
-                raise InputError(model_dir / name, None, "SAM model file is missing",
-                                 f"put a transformers SAM model (save_pretrained of SamModel and SamProcessor, "
-                                 f"e.g. facebook/sam-vit-base) in {model_dir}, or segment with a mask or box")
+        require_model_folder(model_dir, "SAM", "facebook/sam-vit-base", "segment with a mask or a box")
         self.torch, self.device = torch, device
         self.processor = SamProcessor.from_pretrained(model_dir, local_files_only=True)
         self.model = SamModel.from_pretrained(model_dir, local_files_only=True).to(device).eval()

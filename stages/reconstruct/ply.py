@@ -1,0 +1,42 @@
+"""Initial Gaussians from a 3DGS PLY made by another tool (LGM and the like), placed into the input camera.
+
+Coordinate conversion: such tools build the object centred near the origin in
+an OpenGL-style frame, x right, y up, z towards the camera of the input view.
+physmotion's world is the input camera (x right, y down, z forward), so the
+cloud is turned 180 degrees about x (x, y, z) -> (x, -y, -z), its rotations
+likewise (q -> q_x(180) q); then scaled uniformly so that the largest extent of
+its means is size_m; then moved along the ray through the centre of the
+object's mask bounding box to the distance where its width or height (the
+larger) covers the mask's: Z = focal * extent_m / extent_px.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+import splat
+
+from .lift import Gaussians
+
+OPENGL_TO_CAMERA = Rotation.from_euler("x", 180, degrees=True)
+
+
+def place_ply(path: Path, mask: np.ndarray, K: np.ndarray, size_m: float, object_id: int = 0) -> Gaussians:
+    """Gaussians of the PLY at ``path`` placed onto the object ``mask`` (H,W bool) of the camera ``K`` (3,3)."""
+    cloud = splat.read_ply(path)
+    means = OPENGL_TO_CAMERA.apply(cloud.means.astype(np.float64))
+    rotations = (OPENGL_TO_CAMERA * Rotation.from_quat(cloud.rotations, scalar_first=True)).as_quat(scalar_first=True)
+    low, high = means.min(0), means.max(0)
+    scale = size_m / float((high - low).max())
+    means = (means - (low + high) / 2) * scale
+    rows, cols = np.nonzero(mask)
+    extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
+    distance = K[1, 1] * float((means.max(0) - means.min(0))[:2].max()) / extent_px
+    centre_px = np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
+    centre = np.linalg.inv(K) @ centre_px * distance  # on that ray, at camera-space depth `distance`
+    count = len(means)
+    return Gaussians(means + centre, cloud.scales.astype(np.float64) * scale, rotations,
+                     cloud.opacities.astype(np.float64), cloud.colors.astype(np.float64),
+                     np.full(count, object_id))
