@@ -50,16 +50,21 @@ class Plasticine(_Elastic):
 
     preset: Literal["plasticine"] = "plasticine"
     yield_stress: float = Field(5.0e3, gt=0, description="von Mises yield stress in Pa")
-    softening: float = Field(0.1, ge=0, description="yield stress lost per unit plastic strain, as a fraction")
+    softening: float = Field(0.1, ge=0, description="yield stress decays as exp(-softening * equivalent plastic strain)")
 
 
 class Foam(_Elastic):
-    """Viscoplastic foam: squashes and slowly flows."""
+    """Viscoplastic foam (Perzyna over von Mises): squashes and slowly flows back less than it went.
+
+    The overstress above yield relaxes with time constant viscosity / (2 mu),
+    about 25 ms with these defaults.
+    """
 
     preset: Literal["foam"] = "foam"
+    youngs_modulus: float = Field(5.0e4, gt=0, description="Young's modulus E in Pa")
     density: float = Field(200.0, gt=0, description="density in kg/m^3")
     yield_stress: float = Field(2.0e3, gt=0, description="yield stress in Pa")
-    viscosity: float = Field(10.0, gt=0, description="plastic viscosity in Pa s")
+    viscosity: float = Field(1.0e3, gt=0, description="plastic viscosity in Pa s")
 
 
 class Snow(_Elastic):

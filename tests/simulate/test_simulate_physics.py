@@ -92,7 +92,7 @@ def test_torque_grows_angular_momentum_at_the_applied_rate():
 
 def drop(material, seconds=0.4):
     """A 10 cm cube thrown down at 2 m/s onto the ground it rests on (Coulomb friction 0.5)."""
-    return simulate(dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=24,
+    return simulate(dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=20,
                          ground={"enabled": True, "type": "friction", "friction": 0.5},
                          conditions=[{"type": "impulse", "velocity": [0, 2.0, 0]}]),
                     [material], CUBE)

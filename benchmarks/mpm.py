@@ -1,0 +1,74 @@
+"""Speed of the MLS-MPM substep: particle-substeps per second for an elastic cube on a 64^3 grid.
+
+    PYTHONPATH=. python benchmarks/mpm.py [--device cpu] [--steps 40] [--repeats 3]
+
+The cube is a lattice of 2x2x2 particles per cell (fixed-corotated jelly,
+E = 2e5 Pa) in a 1 m domain of 64^3 cells, falling under gravity onto a
+sticky ground; the time per substep is the best of `repeats` runs of `steps`
+substeps after a warm-up, once with one CPU thread and once with the default
+(two on a 2-core CPU).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import warp as wp
+
+from schemas.materials import Jelly
+from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver
+
+GRID = 64
+
+
+def cube(n_particles: int, dx: float) -> np.ndarray:
+    """Lattice cube of about n_particles at dx / 2 spacing, resting 2 cells above the grid floor's wall layer."""
+    side = round(n_particles ** (1 / 3))
+    axis = (np.arange(side) + 0.5) * dx / 2
+    corner = np.array([0.5 - side * dx / 4, 5 * dx, 0.5 - side * dx / 4])
+    return corner + np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+
+
+def time_substep(n_particles: int, threads: int | None, device: str, steps: int, repeats: int) -> tuple[int, int, float]:
+    dx = 1.0 / GRID
+    x = cube(n_particles, dx)
+    volume = np.full(len(x), (dx / 2) ** 3)
+    solver = MPMSolver(Grid((0.0, 0.0, 0.0), dx, (GRID + 1,) * 3), x, 1000 * volume, volume, np.zeros(len(x), int),
+                       [Jelly()], np.array([0.0, -9.81, 0.0]), Ground(GROUND_STICKY), device=device, n_parts=threads)
+    dt = 1e-4
+    for _ in range(10):
+        solver.substep(dt)
+    best = float("inf")
+    for _ in range(repeats):
+        wp.synchronize_device(device)
+        start = time.perf_counter()
+        for _ in range(steps):
+            solver.substep(dt)
+        wp.synchronize_device(device)
+        best = min(best, (time.perf_counter() - start) / steps)
+    used = solver.n_parts
+    solver.close()
+    return len(x), used, best
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args()
+    wp.config.quiet = True
+    wp.init()
+    cpu = wp.get_device(args.device).is_cpu
+    print(f"| particles | grid | threads | ms / substep | million particle-substeps / s |")
+    print(f"| --- | --- | --- | --- | --- |")
+    for n in (30_000, 100_000):
+        for threads in ((1, None) if cpu else (None,)):
+            count, used, seconds = time_substep(n, threads, args.device, args.steps, args.repeats)
+            print(f"| {count} | {GRID}^3 | {used if cpu else args.device} | {1e3 * seconds:.2f} | "
+                  f"{count / seconds / 1e6:.2f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
