@@ -30,7 +30,9 @@ def cube(n_particles: int, dx: float) -> np.ndarray:
     return corner + np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
 
 
-def time_substep(n_particles: int, threads: int | None, device: str, steps: int, repeats: int) -> tuple[int, int, float]:
+def time_substep(n_particles: int, threads: int | None, device: str, steps: int,
+                 repeats: int) -> tuple[int, int, float]:
+    """(particles, threads used, best seconds per substep) for one cube."""
     dx = 1.0 / GRID
     x = cube(n_particles, dx)
     volume = np.full(len(x), (dx / 2) ** 3)

@@ -162,7 +162,8 @@ class Conditions:
                 prescribed[item.members] = 1
                 velocity[item.members] = self.Q @ np.asarray(c.velocity) if c.type == "velocity" else 0.0
             elif c.type == "force":
-                force[item.members] += (self.Q @ np.asarray(c.force))[None, :] * (self.masses[item.members, None] / item.mass)
+                share = self.masses[item.members, None] / item.mass
+                force[item.members] += share * (self.Q @ np.asarray(c.force))[None, :]
         solver.prescribed.assign(prescribed)
         solver.prescribed_velocity.assign(velocity)
         self._base_force.assign(force)

@@ -103,8 +103,9 @@ def particle_to_grid(
             for k in range(3):
                 w = wx[i] * wy[j] * wz[k]
                 offset = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                wp.atomic_add(grid_momentum, part, base[0] + i, base[1] + j, base[2] + k, w * (momentum + affine * offset))
-                wp.atomic_add(grid_mass, part, base[0] + i, base[1] + j, base[2] + k, w * m)
+                node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
+                wp.atomic_add(grid_momentum, part, node[0], node[1], node[2], w * (momentum + affine * offset))
+                wp.atomic_add(grid_mass, part, node[0], node[1], node[2], w * m)
 
 
 @wp.func

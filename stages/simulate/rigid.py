@@ -157,8 +157,8 @@ class RigidBodies:
             self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.v,
             self.linear, self.angular, self.lowest])
         wp.launch(integrate_rigid_bodies, dim=len(self.total_mass), device=dev, inputs=[
-            dt, self.ground_y, self.lowest, self.total_mass, self.rest_inertia, self.linear, self.angular, self.centre, self.orientation,
-            self.velocity, self.spin])
+            dt, self.ground_y, self.lowest, self.total_mass, self.rest_inertia, self.linear, self.angular,
+            self.centre, self.orientation, self.velocity, self.spin])
         wp.launch(apply_rigid_motion, dim=n, device=dev, inputs=[
             self.members, self.body, self.rest_offset, self.centre, self.orientation, self.velocity, self.spin,
             solver.x, solver.v, solver.C, solver.F])

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import warp as wp
+from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -44,7 +45,6 @@ def shape_error(rest: np.ndarray, now: np.ndarray, reduce=np.max) -> float:
 def pieces(points: np.ndarray, link: float, min_size: int) -> int:
     """Number of connected clusters of at least min_size points, linking points closer than `link`."""
     pairs = cKDTree(points).query_pairs(link, output_type="ndarray")
-    from scipy.sparse import coo_matrix
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
     _, labels = connected_components(graph, directed=False)
     return int(np.sum(np.bincount(labels) >= min_size))
