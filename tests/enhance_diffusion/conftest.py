@@ -81,5 +81,17 @@ def write_inputs(folder: Path, enhance: dict) -> dict:
     return paths
 
 
-# Few steps and frames: every sampling timestep must be an inverted one (4 | 4).
-FAST = {"resolution": SIZE, "steps": 4, "inversion_stride": 250, "frame_batch": 2, "keyframe_window": 2}
+@pytest.fixture
+def scene_inputs(tmp_path):
+    """write_inputs(settings) in a fresh folder, with few steps and small batches unless overridden:
+    four sampling steps over four inverted ones, three frames in batches of two."""
+    def make(settings: dict | None = None) -> dict:
+        fast = {"resolution": SIZE, "steps": 4, "inversion_stride": 250, "frame_batch": 2, "keyframe_window": 2}
+        return write_inputs(tmp_path / "scene", {**fast, **(settings or {})})
+    return make
+
+
+@pytest.fixture
+def with_models(saved_models) -> dict:
+    """enhance.diffusion settings naming the saved tiny models."""
+    return {"models": {k: str(v) for k, v in saved_models.items()}}

@@ -136,12 +136,13 @@ def load_components(models: DiffusionModels, scene_file: Path, device: str, lora
     log.info("loading Stable Diffusion from %s, ControlNets from %s and %s", sd, paths["controlnet_depth"],
              paths["controlnet_canny"])
     local = dict(local_files_only=True)
+    typed = dict(local, torch_dtype=dtype)
     components = Components(
         vae=AutoencoderKL.from_pretrained(sd, subfolder="vae", **local).to(device),
-        text_encoder=CLIPTextModel.from_pretrained(sd, subfolder="text_encoder", **local).to(device, dtype),
+        text_encoder=CLIPTextModel.from_pretrained(sd, subfolder="text_encoder", **typed).to(device),
         tokenizer=AutoTokenizer.from_pretrained(sd, subfolder="tokenizer", **local),
-        unet=UNet2DConditionModel.from_pretrained(sd, subfolder="unet", **local).to(device, dtype),
-        controlnet=MultiControlNetModel([ControlNetModel.from_pretrained(paths[name], **local).to(device, dtype)
+        unet=UNet2DConditionModel.from_pretrained(sd, subfolder="unet", **typed).to(device),
+        controlnet=MultiControlNetModel([ControlNetModel.from_pretrained(paths[name], **typed).to(device)
                                          for name in ("controlnet_depth", "controlnet_canny")]),
         scheduler=DDIMScheduler.from_pretrained(sd, subfolder="scheduler", **local),
     )
