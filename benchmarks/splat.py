@@ -5,7 +5,8 @@
 The scene is an object-like blob (the reconstruction's use): G Gaussians in a
 ball of radius 0.5 m, 2.5 m in front of a 40-degree camera, scales
 log-uniform in [5 mm, 3 cm], opacities uniform in [0.2, 1], RGB features.
-Times are medians over the repeats after one warm-up (which also compiles).
+Times are medians over the repeats after one warm-up (which also compiles):
+wall seconds, and in brackets the process's CPU seconds over all threads.
 Peak memory: the process's peak resident set growth on the CPU (each case runs
 in its own subprocess), torch's peak allocation on CUDA.
 """
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import resource
 import statistics
 import subprocess
@@ -70,34 +72,36 @@ def run_case(num_gaussians: int, width: int, device: str, repeats: int) -> dict:
         for leaf in leaves:
             leaf.grad = None
 
-    def median_time(fn) -> float:
+    def median_time(fn) -> tuple[float, float]:
+        """Median wall and process CPU seconds (CPU time is what other loads on the machine cannot inflate)."""
         fn()  # warm-up, compiles kernels
-        times = []
+        wall, cpu = [], []
         for _ in range(repeats):
             sync()
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             fn()
             sync()
-            times.append(time.perf_counter() - start)
-        return statistics.median(times)
+            wall.append(time.perf_counter() - start)
+            cpu.append(time.process_time() - start_cpu)
+        return statistics.median(wall), statistics.median(cpu)
 
     rss_before_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     if device.startswith("cuda"):
         torch.cuda.reset_peak_memory_stats()
     with torch.no_grad():
-        t_forward = median_time(forward)
-    t_both = median_time(forward_backward)
+        t_forward, cpu_forward = median_time(forward)
+    t_both, cpu_both = median_time(forward_backward)
     if device.startswith("cuda"):
         peak_mib = torch.cuda.max_memory_allocated() / 2**20
     else:
         peak_mib = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss_before_kib) / 1024
     with torch.no_grad():
-        covariances = splat.covariances_from_scales_rotations(scales, rotations)
-        projection = project_gaussians(means, covariances, camera)
+        projection = project_gaussians(means, camera, scales=scales, rotations=rotations)
         bins = bin_gaussians(projection.means2d, projection.conics, opacities, projection.depths,
                              camera.width, camera.height)
     return {"gaussians": num_gaussians, "size": width, "forward_s": t_forward, "forward_backward_s": t_both,
-            "peak_mib": peak_mib, "intersections": int(bins.gaussian_ids.shape[0])}
+            "forward_cpu_s": cpu_forward, "forward_backward_cpu_s": cpu_both, "peak_mib": peak_mib,
+            "intersections": int(bins.gaussian_ids.shape[0])}
 
 
 def main() -> None:
@@ -110,16 +114,18 @@ def main() -> None:
         print(json.dumps(run_case(*args.case, args.device, args.repeats)))
         return
 
-    print(f"splat.rasterize on {args.device}, median of {args.repeats}")
-    print(f"| Gaussians | image | intersections | forward (s) | forward+backward (s) | peak memory (MiB) |")
-    print(f"| ---: | ---: | ---: | ---: | ---: | ---: |")
+    print(f"splat.rasterize on {args.device}, median of {args.repeats}; {os.cpu_count()} CPUs, "
+          f"load average at start {os.getloadavg()[0]:.1f}")
+    print("| Gaussians | image | intersections | forward s (CPU s) | forward+backward s (CPU s) | peak memory MiB |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: |")
     for num_gaussians, width in CASES:
         result = subprocess.run(
             [sys.executable, __file__, "--device", args.device, "--repeats", str(args.repeats),
              "--case", str(num_gaussians), str(width)], capture_output=True, text=True, check=True)
         r = json.loads(result.stdout.strip().splitlines()[-1])
-        print(f"| {r['gaussians']:,} | {r['size']}x{r['size']} | {r['intersections']:,} | {r['forward_s']:.3f} "
-              f"| {r['forward_backward_s']:.3f} | {r['peak_mib']:.0f} |", flush=True)
+        print(f"| {r['gaussians']:,} | {r['size']}x{r['size']} | {r['intersections']:,} "
+              f"| {r['forward_s']:.3f} ({r['forward_cpu_s']:.3f}) "
+              f"| {r['forward_backward_s']:.3f} ({r['forward_backward_cpu_s']:.3f}) | {r['peak_mib']:.0f} |", flush=True)
 
 
 if __name__ == "__main__":

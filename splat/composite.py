@@ -20,7 +20,7 @@ import torch
 import warp as wp
 
 from .binning import ALPHA_MIN, POWER_MARGIN, TILE_SIZE, TileBins
-from .launch import launch
+from .launch import launch, torch_single_threaded
 
 ALPHA_MAX = wp.constant(0.99)
 """Alpha is clamped to this so that one Gaussian never hides everything behind it."""
@@ -218,6 +218,7 @@ class _CompositeGaussians(torch.autograd.Function):
         return out_features, out_alpha, out_depth
 
     @staticmethod
+    @torch_single_threaded()
     def backward(ctx, grad_features_out, grad_alpha_out, grad_depth_out):
         transmittances, ends, background = ctx.saved_tensors
         bins, G = ctx.bins, ctx.num_gaussians

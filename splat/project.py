@@ -13,7 +13,7 @@ import torch
 import warp as wp
 
 from .camera import Camera
-from .launch import launch
+from .launch import launch, torch_single_threaded
 
 NEAR_PLANE = wp.constant(0.01)
 """Gaussians whose mean has camera-space z below this are culled (metres)."""
@@ -25,10 +25,25 @@ FOV_CLAMP = 1.3
 mat23 = wp.types.matrix(shape=(2, 3), dtype=float)
 
 
+@wp.func
+def covariance_from_scale_rotation(scale: wp.vec3, quaternion: wp.vec4) -> wp.mat33:
+    """R S S^T R^T for a quaternion (w, x, y, z), normalised here (as splat.covariance does in torch)."""
+    q = wp.normalize(quaternion)
+    w, x, y, z = q[0], q[1], q[2], q[3]
+    R = wp.mat33(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - w * z), 2.0 * (x * z + w * y),
+                 2.0 * (x * y + w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - w * x),
+                 2.0 * (x * z - w * y), 2.0 * (y * z + w * x), 1.0 - 2.0 * (x * x + y * y))
+    M = R * wp.diag(scale)
+    return M * wp.transpose(M)
+
+
 @wp.kernel
 def project_gaussians_kernel(
     means: wp.array(dtype=wp.vec3),
     covariances: wp.array(dtype=wp.mat33),
+    scales: wp.array(dtype=wp.vec3),
+    rotations: wp.array(dtype=wp.vec4),
+    from_scales: int,
     rotation: wp.mat33,
     translation: wp.vec3,
     focal: wp.vec2,
@@ -40,7 +55,8 @@ def project_gaussians_kernel(
     distances: wp.array(dtype=float),
     depths: wp.array(dtype=float),
 ):
-    """Project Gaussian i; culled ones get a zero conic, which binning skips."""
+    """Project Gaussian i, its covariance given or (from_scales) built from scale and rotation;
+    culled ones get a zero conic, which binning skips."""
     i = wp.tid()
     p = rotation * means[i] + translation
     depths[i] = p[2]
@@ -53,7 +69,12 @@ def project_gaussians_kernel(
         ty = p[2] * wp.clamp(p[1] * rz, tan_lim_low[1], tan_lim_high[1])
         J = mat23(focal[0] * rz, 0.0, -focal[0] * tx * rz * rz,
                   0.0, focal[1] * rz, -focal[1] * ty * rz * rz)
-        cov_camera = rotation * covariances[i] * wp.transpose(rotation)
+        cov_world = wp.mat33(0.0)
+        if from_scales:
+            cov_world = covariance_from_scale_rotation(scales[i], rotations[i])
+        else:
+            cov_world = covariances[i]
+        cov_camera = rotation * cov_world * wp.transpose(rotation)
         cov2d = J * cov_camera * wp.transpose(J)
         a = cov2d[0, 0] + DILATION
         b = 0.5 * (cov2d[0, 1] + cov2d[1, 0])  # symmetric in both, so the covariance gradient is symmetric
@@ -102,51 +123,51 @@ class _CameraArgs:
         return [wp.mat33(), wp.vec3(), wp.vec2(), wp.vec2(), wp.vec2(), wp.vec2()]
 
 
-def _kernel_inputs(means: torch.Tensor, covariances: torch.Tensor, camera_args: _CameraArgs) -> list:
-    return [wp.from_torch(means.detach(), dtype=wp.vec3), wp.from_torch(covariances.detach(), dtype=wp.mat33),
-            *camera_args.as_list()]
-
-
 class _ProjectGaussians(torch.autograd.Function):
-    @staticmethod
-    def forward(ctx, means: torch.Tensor, covariances: torch.Tensor, camera: Camera):
-        G, device = means.shape[0], means.device
-        means2d = torch.zeros(G, 2, device=device)
-        conics = torch.zeros(G, 3, device=device)
-        distances = torch.zeros(G, device=device)
-        depths = torch.zeros(G, device=device)
-        camera_args = _CameraArgs.of(camera)
-        inputs = _kernel_inputs(means, covariances, camera_args)
-        outputs = [wp.from_torch(means2d, dtype=wp.vec2), wp.from_torch(conics, dtype=wp.vec3),
-                   wp.from_torch(distances), wp.from_torch(depths)]
-        launch(project_gaussians_kernel, G, inputs=inputs, outputs=outputs, device=device)
-        ctx.save_for_backward(means, covariances)
-        ctx.camera_args = camera_args
-        ctx.mark_non_differentiable(depths)
-        return means2d, conics, distances, depths
+    """Differentiable in means and in either covariances or scales and rotations (the other pair is empty)."""
 
     @staticmethod
-    def backward(ctx, grad_means2d, grad_conics, grad_distances, _grad_depths):
-        means, covariances = ctx.saved_tensors
+    def forward(ctx, means, covariances, scales, rotations, camera: Camera):
         G, device = means.shape[0], means.device
-        grad_means = torch.zeros_like(means)
-        grad_covariances = torch.zeros_like(covariances)
+        ctx.camera_args, ctx.from_scales = _CameraArgs.of(camera), covariances.shape[0] == 0
+        outputs = [torch.zeros(G, 2, device=device), torch.zeros(G, 3, device=device),
+                   torch.zeros(G, device=device), torch.zeros(G, device=device)]
+        launch(project_gaussians_kernel, G, inputs=_kernel_inputs(ctx, [means, covariances, scales, rotations]),
+               outputs=_warp_outputs(outputs), device=device)
+        ctx.save_for_backward(means, covariances, scales, rotations)
+        ctx.mark_non_differentiable(outputs[3])
+        return tuple(outputs)
+
+    @staticmethod
+    @torch_single_threaded()
+    def backward(ctx, grad_means2d, grad_conics, grad_distances, _grad_depths):
+        inputs = ctx.saved_tensors
+        grads = [torch.zeros_like(x) for x in inputs]
+        G, device = inputs[0].shape[0], inputs[0].device
         # The adjoint replays the forward pass; its outputs go to scratch arrays.
-        scratch = [wp.from_torch(torch.empty(G, 2, device=device), dtype=wp.vec2),
-                   wp.from_torch(torch.empty(G, 3, device=device), dtype=wp.vec3),
-                   wp.from_torch(torch.empty(G, device=device)), wp.from_torch(torch.empty(G, device=device))]
-        launch(
-            project_gaussians_kernel, G,
-            inputs=_kernel_inputs(means, covariances, ctx.camera_args),
-            outputs=scratch,
-            adj_inputs=[wp.from_torch(grad_means, dtype=wp.vec3), wp.from_torch(grad_covariances, dtype=wp.mat33),
-                        *_CameraArgs.zeros()],
-            adj_outputs=[wp.from_torch(grad_means2d.contiguous(), dtype=wp.vec2),
-                         wp.from_torch(grad_conics.contiguous(), dtype=wp.vec3),
-                         wp.from_torch(grad_distances.contiguous()), None],
-            adjoint=True, device=device,
-        )
-        return grad_means, grad_covariances, None
+        scratch = [torch.empty(G, 2, device=device), torch.empty(G, 3, device=device),
+                   torch.empty(G, device=device), torch.empty(G, device=device)]
+        incoming = [grad_means2d.contiguous(), grad_conics.contiguous(), grad_distances.contiguous()]
+        launch(project_gaussians_kernel, G, inputs=_kernel_inputs(ctx, inputs),
+               outputs=_warp_outputs(scratch),
+               adj_inputs=[*_warp_inputs(grads), 0, *_CameraArgs.zeros()],
+               adj_outputs=[*_warp_outputs(incoming), None],
+               adjoint=True, device=device)
+        return (*grads, None)
+
+
+def _kernel_inputs(ctx, tensors: list) -> list:
+    return [*_warp_inputs([t.detach() for t in tensors]), int(ctx.from_scales), *ctx.camera_args.as_list()]
+
+
+def _warp_inputs(tensors: list) -> list:
+    """(means, covariances, scales, rotations) as Warp arrays."""
+    return [wp.from_torch(t, dtype=d) for t, d in zip(tensors, (wp.vec3, wp.mat33, wp.vec3, wp.vec4))]
+
+
+def _warp_outputs(tensors: list) -> list:
+    """(means2d, conics, distances[, depths]) as Warp arrays."""
+    return [wp.from_torch(t, dtype=d) for t, d in zip(tensors, (wp.vec2, wp.vec3, wp.float32, wp.float32))]
 
 
 @dataclass
@@ -165,12 +186,17 @@ class Projection:
     depths: torch.Tensor
 
 
-def project_gaussians(means: torch.Tensor, covariances: torch.Tensor, camera: Camera) -> Projection:
-    """EWA-project Gaussians (differentiable with respect to means and covariances).
+def project_gaussians(means: torch.Tensor, camera: Camera, *, covariances: torch.Tensor | None = None,
+                      scales: torch.Tensor | None = None, rotations: torch.Tensor | None = None) -> Projection:
+    """EWA-project Gaussians, differentiable in means and in the shape given.
 
     Args:
         means: (G, 3) float32 world positions, metres.
-        covariances: (G, 3, 3) float32 world covariances, metres^2.
         camera: the view.
+        covariances: (G, 3, 3) float32 world covariances, metres^2; or
+        scales, rotations: (G, 3) linear standard deviations, metres, and (G, 4) quaternions (w, x, y, z).
     """
-    return Projection(*_ProjectGaussians.apply(means.contiguous(), covariances.contiguous(), camera))
+    empty = means.new_zeros(0)
+    shape = [covariances.reshape(-1, 3, 3), empty.reshape(0, 3), empty.reshape(0, 4)] if covariances is not None \
+        else [empty.reshape(0, 3, 3), scales, rotations]
+    return Projection(*_ProjectGaussians.apply(means.contiguous(), *(t.contiguous() for t in shape), camera))

@@ -8,7 +8,7 @@ import torch
 from .binning import bin_gaussians
 from .camera import Camera
 from .composite import composite
-from .covariance import covariances_from_scales_rotations
+from .launch import torch_single_threaded
 from .project import project_gaussians
 
 
@@ -28,6 +28,7 @@ def _check(name: str, tensor: torch.Tensor, shape: tuple, device: torch.device) 
     return tensor.float()
 
 
+@torch_single_threaded()
 def rasterize(means: torch.Tensor, opacities: torch.Tensor, features: torch.Tensor, camera: Camera, *,
               scales: Optional[torch.Tensor] = None, rotations: Optional[torch.Tensor] = None,
               covariances: Optional[torch.Tensor] = None, background: Optional[torch.Tensor] = None,
@@ -57,16 +58,17 @@ def rasterize(means: torch.Tensor, opacities: torch.Tensor, features: torch.Tens
     opacities = _check("opacities", opacities, (G,), device)
     features = _check("features", features, (G, features.shape[-1] if features.dim() == 2 else -1), device)
     if covariances is None:
-        covariances = covariances_from_scales_rotations(_check("scales", scales, (G, 3), device),
-                                                        _check("rotations", rotations, (G, 4), device))
-    covariances = _check("covariances", covariances, (G, 3, 3), device)
+        shape = dict(scales=_check("scales", scales, (G, 3), device), rotations=_check("rotations", rotations, (G, 4), device))
+    else:
+        shape = dict(covariances=_check("covariances", covariances, (G, 3, 3), device))
     C = features.shape[1]
     background = torch.zeros(C, device=device) if background is None else _check("background", background, (C,), device)
     if hard_depth:
         opacities = torch.full_like(opacities, delta)
-        covariances, features, background = covariances.detach(), features.detach(), background.detach()
+        shape = {name: tensor.detach() for name, tensor in shape.items()}
+        features, background = features.detach(), background.detach()
 
-    projection = project_gaussians(means, covariances, camera)
+    projection = project_gaussians(means, camera, **shape)
     bins = bin_gaussians(projection.means2d, projection.conics, opacities, projection.depths,
                          camera.width, camera.height)
     return Render(*composite(projection.means2d, projection.conics, opacities, projection.distances,
