@@ -21,7 +21,8 @@ class Render(NamedTuple):
 
 
 def _check(name: str, tensor: torch.Tensor, shape: tuple, device: torch.device) -> torch.Tensor:
-    if tuple(tensor.shape) != shape:
+    """``tensor`` as float32 after checking its shape (None in ``shape``: any size) and device."""
+    if tensor.dim() != len(shape) or any(want not in (None, got) for want, got in zip(shape, tensor.shape)):
         raise ValueError(f"rasterize: {name} must have shape {shape}, got {tuple(tensor.shape)}")
     if tensor.device != device:
         raise ValueError(f"rasterize: {name} is on {tensor.device}, means on {device}")
@@ -53,16 +54,20 @@ def rasterize(means: torch.Tensor, opacities: torch.Tensor, features: torch.Tens
     """
     if (covariances is None) == (scales is None or rotations is None):
         raise ValueError("rasterize: pass either scales and rotations, or covariances")
+    if not 0.0 < delta <= 1.0:
+        raise ValueError(f"rasterize: delta must be in (0, 1], got {delta}")
     device, G = means.device, means.shape[0]
     means = _check("means", means, (G, 3), device)
     opacities = _check("opacities", opacities, (G,), device)
-    features = _check("features", features, (G, features.shape[-1] if features.dim() == 2 else -1), device)
+    features = _check("features", features, (G, None), device)
     if covariances is None:
-        shape = dict(scales=_check("scales", scales, (G, 3), device), rotations=_check("rotations", rotations, (G, 4), device))
+        shape = dict(scales=_check("scales", scales, (G, 3), device),
+                     rotations=_check("rotations", rotations, (G, 4), device))
     else:
         shape = dict(covariances=_check("covariances", covariances, (G, 3, 3), device))
     C = features.shape[1]
-    background = torch.zeros(C, device=device) if background is None else _check("background", background, (C,), device)
+    background = torch.zeros(C, device=device) if background is None else _check("background", background, (C,),
+                                                                                   device)
     if hard_depth:
         opacities = torch.full_like(opacities, delta)
         shape = {name: tensor.detach() for name, tensor in shape.items()}

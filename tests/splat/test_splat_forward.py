@@ -137,3 +137,14 @@ def test_camera_scaled_to_width_keeps_the_view():
     point = np.array([0.3, -0.2, 2.0])
     pixel = (camera.K @ point / point[2])[:2]
     assert np.allclose((half.K @ point / point[2])[:2], pixel * 321 / 640)  # the whole pixel frame scales
+
+
+def test_bad_arguments_are_refused():
+    scene = random_scene(19, 5, 10, 10)
+    with pytest.raises(ValueError, match="either scales and rotations, or covariances"):
+        splat.rasterize(scene.means, scene.opacities, scene.features, scene.camera, scales=scene.scales)
+    with pytest.raises(ValueError, match="features must have shape"):
+        splat.rasterize(scene.means, scene.opacities, scene.features[:4], scene.camera, scales=scene.scales,
+                        rotations=scene.rotations)
+    with pytest.raises(ValueError, match="Camera.K"):
+        splat.Camera(np.eye(4), np.eye(4), 10, 10)
