@@ -44,7 +44,8 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     if not axis.any():  # a one-pixel-wide mask
         axis = padded.copy()
     _, axis_index = ndimage.distance_transform_edt(~axis, return_indices=True)
-    radius = dist[axis_index[0], axis_index[1]]
+    # The flagged pixels straddle the true axis, up to a pixel off its crest: take the crest nearby.
+    radius = ndimage.maximum_filter(dist, size=3)[axis_index[0], axis_index[1]]
     d = np.minimum(dist, radius)
     half = np.sqrt(np.maximum(radius ** 2 - (radius - d) ** 2, 0.0))
     return np.where(padded, half, 0.0)[1:-1, 1:-1]
@@ -91,24 +92,34 @@ def unit_distance_shape(mask: np.ndarray, focal: float,
     return ObjectDepth(np.where(mask, front, np.nan), np.where(mask, back, np.nan))
 
 
-def largest_extent(depth: ObjectDepth, K: np.ndarray) -> float:
-    """Largest side of the axis-aligned box around the lifted front and back points (metres)."""
-    rays = pixel_rays(K, *depth.front.shape)
-    rays = rays / rays[..., 2:3]  # so that point = ray * z
-    points = np.concatenate([rays[depth.pixels] * depth.front[depth.pixels, None],
-                             rays[depth.pixels] * depth.back[depth.pixels, None]])
-    return float((points.max(0) - points.min(0)).max())
+def largest_extent_px(mask: np.ndarray) -> float:
+    """Largest extent (pixels) of a silhouette: the longest side of its box aligned with the principal
+    axes of its pixels, so that a tilted object measures its own length, not an axis-aligned box's width."""
+    points = np.argwhere(mask).astype(np.float64)
+    points -= points.mean(0)
+    _, axes = np.linalg.eigh(points.T @ points)
+    along = points @ axes
+    return float((along.max(0) - along.min(0)).max()) + 1.0  # pixel centres to pixel edges
 
 
 def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float],
                   inverse_depth: Optional[np.ndarray] = None) -> list[ObjectDepth]:
-    """Metric front/back depths of each object (labels k+1), its largest extent scaled to sizes_m[k]."""
+    """Metric front/back depths of each object (labels k+1).
+
+    Its largest extent is sizes_m[k]: the larger of the silhouette's extent and
+    the inflation's thickness, both in pixels, equals size_m at the distance
+    Z = size_m * focal / extent_px of the silhouette's centre plane. (Measuring
+    the lifted 3D points instead over-sizes by a few percent: the back of the
+    rim spreads along the diverging rays.)
+    """
     out = []
     for k, size in enumerate(sizes_m):
         mask = labels == k + 1
-        shape = unit_distance_shape(mask, K[1, 1], inverse_depth)
-        scale = size / largest_extent(shape, K)
-        out.append(ObjectDepth(shape.front * scale, shape.back * scale))
+        focal = K[1, 1]
+        shape = unit_distance_shape(mask, focal, inverse_depth)
+        extent_px = max(largest_extent_px(mask), 2 * inflation_half_thickness(mask).max())
+        distance = size * focal / extent_px
+        out.append(ObjectDepth(shape.front * distance, shape.back * distance))
     return out
 
 
