@@ -1,5 +1,6 @@
 """Launching Warp kernels from torch code: device, stream, and CPU threads."""
 import contextlib
+import threading
 
 import torch
 import warp as wp
@@ -13,18 +14,36 @@ def launch(kernel, dim, inputs: list, outputs: list, device: torch.device, **kwa
     wp.launch(kernel, dim=dim, inputs=inputs, outputs=outputs, device=wp_device, stream=stream, **kwargs)
 
 
-@contextlib.contextmanager
-def torch_single_threaded():
-    """Run torch's own ops single-threaded while splat works.
+class _TorchThreads:
+    """Counts who is inside ``single()``: the first to enter (of nested or concurrent
+    callers) sets one thread, the last to leave restores the caller's setting."""
 
-    splat's torch ops are small gathers, sorts and sums; its CPU time goes to Warp
-    kernels launched from several Python threads. Torch's OpenMP workers spin-wait
-    after each parallel op and take the cores from those threads: on 2 cores a
-    render plus backward took 3-5x longer with them. Usable as a decorator.
-    """
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.users = 0
+        self.saved = 1
+
+    @contextlib.contextmanager
+    def single(self):
+        with self.lock:
+            if self.users == 0:
+                self.saved = torch.get_num_threads()
+                torch.set_num_threads(1)
+            self.users += 1
+        try:
+            yield
+        finally:
+            with self.lock:
+                self.users -= 1
+                if self.users == 0:
+                    torch.set_num_threads(self.saved)
+
+
+torch_single_threaded = _TorchThreads().single
+"""Run torch's own ops single-threaded while splat works (a context manager, or a decorator).
+
+splat's torch ops are small gathers, sorts and sums; its CPU time goes to Warp
+kernels launched from several Python threads. Torch's OpenMP workers spin-wait
+after each parallel op and take the cores from those threads: on 2 cores a
+render plus backward took 3-5x the CPU time with them.
+"""

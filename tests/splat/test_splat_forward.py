@@ -148,3 +148,19 @@ def test_bad_arguments_are_refused():
                         rotations=scene.rotations)
     with pytest.raises(ValueError, match="Camera.K"):
         splat.Camera(np.eye(4), np.eye(4), 10, 10)
+
+
+def test_torch_thread_setting_is_restored():
+    # splat runs torch single-threaded inside (see splat.launch); the caller's setting must survive.
+    scene = random_scene(20, 50, 20, 20)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        means = scene.means.clone().requires_grad_()
+        out = splat.rasterize(means, scene.opacities, scene.features, scene.camera, scales=scene.scales,
+                              rotations=scene.rotations)
+        assert torch.get_num_threads() == 2
+        out.features.sum().backward()
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
