@@ -4,7 +4,7 @@ Same block layout as SD 2.1 (three cross-attention down blocks and a plain one,
 mirrored up blocks, linear projections in the transformers, two layers per
 block), with a few channels; two ControlNets whose zero-convolutions are
 perturbed so that the control images matter; a word-level tokenizer built in
-memory. ``full_size_unet`` gives SD 2.1's real UNet shape with random weights.
+memory. ``full_size_components`` gives SD 2.1's real shapes with random weights.
 """
 from __future__ import annotations
 
@@ -63,7 +63,7 @@ def _controlnet(unet, seed: int):
 
 
 def tiny_components(prediction_type: str = "v_prediction", seed: int = 0) -> Components:
-    """A random tiny model; 64 x 64 px images give 8 x 8 latents (sizes must be multiples of 64)."""
+    """A random tiny model; 64 x 64 px images give 8 x 8 latents (image sides: multiples of 64)."""
     from diffusers import AutoencoderKL, DDIMScheduler, MultiControlNetModel
     from transformers import CLIPTextConfig, CLIPTextModel
 
@@ -81,6 +81,29 @@ def tiny_components(prediction_type: str = "v_prediction", seed: int = 0) -> Com
     for model in (vae, text, unet, components.controlnet):
         model.eval()
     return components
+
+
+def full_size_components(device: str) -> Components:
+    """SD 2.1's UNet, VAE and two ControlNets at full size with random weights, for timing; fp16 on CUDA.
+
+    The text encoder has SD 2.1's width but one layer: it runs once per video.
+    """
+    from diffusers import AutoencoderKL, ControlNetModel, DDIMScheduler, MultiControlNetModel
+    from transformers import CLIPTextConfig, CLIPTextModel
+
+    dtype = torch.float16 if device.startswith("cuda") else torch.float32
+    unet = full_size_unet()
+    controlnet = MultiControlNetModel([ControlNetModel.from_unet(unet) for _ in range(2)])
+    vae = AutoencoderKL(block_out_channels=(128, 256, 512, 512), down_block_types=("DownEncoderBlock2D",) * 4,
+                        up_block_types=("UpDecoderBlock2D",) * 4, layers_per_block=2, latent_channels=4,
+                        sample_size=768)
+    text = CLIPTextModel(CLIPTextConfig(vocab_size=len(WORDS) + 3, hidden_size=1024, intermediate_size=4096,
+                                        num_hidden_layers=1, num_attention_heads=16, max_position_embeddings=16,
+                                        bos_token_id=0, eos_token_id=1, pad_token_id=1))
+    for model in (unet, controlnet, text):
+        model.to(device, dtype).eval()
+    return Components(vae=vae.to(device).eval(), text_encoder=text, tokenizer=_tokenizer(), unet=unet,
+                      controlnet=controlnet, scheduler=DDIMScheduler(prediction_type="v_prediction", **SD21_SCHEDULER))
 
 
 def save_tiny_models(components: Components, folder: Path) -> dict:
