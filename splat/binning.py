@@ -39,7 +39,7 @@ def extent_squared(conic: wp.vec3, opacity: float) -> float:
     """k^2 with alpha >= 1/255 exactly inside the ellipse d^T Sigma^-1 d <= k^2 = 2 ln(255 opacity)
     (plus the margin); -1 when the Gaussian reaches nothing or is culled (zero conic)."""
     det = conic[0] * conic[2] - conic[1] * conic[1]
-    if opacity < ALPHA_MIN or det <= 0.0 or conic[0] <= 0.0:
+    if not (opacity >= ALPHA_MIN and det > 0.0 and conic[0] > 0.0):  # written so that NaN fails too
         return -1.0
     return 2.0 * wp.log(255.0 * opacity) + 2.0 * POWER_MARGIN
 

@@ -83,7 +83,7 @@ def project_gaussians_kernel(
         if det > 0.0:
             conic = wp.vec3(c / det, -b / det, a / det)
         means2d[i] = wp.vec2(focal[0] * p[0] * rz + principal[0], focal[1] * p[1] * rz + principal[1])
-        distances[i] = wp.length(p)
+        distances[i] = wp.length(p)  # the camera centre is the camera frame's origin (rigid world_to_camera)
     conics[i] = conic
 
 

@@ -164,3 +164,18 @@ def test_torch_thread_setting_is_restored():
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_non_finite_gaussians_are_culled_not_smeared():
+    scene = random_scene(21, 100, 30, 20)
+    clean = render_warp(scene)
+    broken = scene.with_(means=torch.cat([scene.means, torch.tensor([[float("nan"), 0.0, 2.0], [0.0, 0.0, 2.0]])]),
+                         scales=torch.cat([scene.scales, torch.tensor([[0.1, 0.1, 0.1], [float("inf"), 0.1, 0.1]])]),
+                         rotations=torch.cat([scene.rotations, torch.tensor([[1.0, 0, 0, 0]] * 2)]),
+                         opacities=torch.cat([scene.opacities, torch.tensor([0.9, 0.9])]),
+                         features=torch.cat([scene.features, torch.ones(2, 3)]))
+    dirty = render_warp(broken)
+    for a, b in zip(clean, dirty):
+        assert torch.equal(a, b)
+    nan_opacity = scene.with_(opacities=torch.cat([scene.opacities[:-1], torch.tensor([float("nan")])]))
+    assert torch.isfinite(render_warp(nan_opacity).features).all()
