@@ -131,3 +131,16 @@ def test_pm_lora_trains_saves_and_the_lora_changes_the_model(tmp_path, scene_inp
     with torch.no_grad():
         assert not torch.allclose(base.unet(x, 500, text).sample, tuned.unet(x, 500, text).sample)
     assert not list(out.parent.glob(".lora.partial-*"))
+
+
+def test_enhance_refuses_latents_without_the_sampling_timesteps(scene_inputs, with_models):
+    paths = scene_inputs({**with_models, "steps": 5})  # 5 sampling steps visit t = 801, ... not inverted
+    scene = load_scene(paths["scene"])
+    latents = LatentsArtifact(latents=np.zeros((FRAMES, 5, 4, 8, 8), np.float16),
+                              timesteps=np.array([-1, 1, 251, 501, 751]), scheduler=json.dumps(
+                                  {"prediction_type": "v_prediction", "beta_schedule": "scaled_linear",
+                                   "beta_start": 0.00085, "beta_end": 0.012, "num_train_timesteps": 1000}),
+                              prompt=scene.prompt)
+    with pytest.raises(InputError, match="not inverted"):
+        enhance_video(scene, read_artifact(paths["coarse"], CoarseArtifact),
+                      read_artifact(paths["gaussians"], GaussiansArtifact), latents, None, "cpu")

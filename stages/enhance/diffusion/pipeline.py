@@ -25,7 +25,7 @@ from .components import Components
 from .conditioning import canny_control, inverse_depth_control, model_size, to_tensor, to_u8
 from .inversion import inverse_scheduler, invert_video, stored_timesteps
 from .models import load_components
-from .sampling import sample
+from .sampling import sample, sampling_timesteps
 
 log = logging.getLogger("physmotion.diffusion")
 
@@ -74,8 +74,9 @@ def invert_frames(components: Components, inputs: VideoInputs, prompt: str,
                            scheduler=scheduler_json(dict(components.scheduler.config)), prompt=prompt)
 
 
-def _check_latents(latents: LatentsArtifact, components: Components, inputs: VideoInputs, prompt: str) -> None:
-    """The latents must come from this video, this model and this prompt."""
+def _check_latents(latents: LatentsArtifact, components: Components, inputs: VideoInputs, prompt: str,
+                   settings: DiffusionSettings) -> None:
+    """The latents must come from this video, this model and this prompt, at the timesteps sampling visits."""
     expected = (len(inputs.blended), 4, inputs.blended.shape[1] // 8, inputs.blended.shape[2] // 8)
     found = (latents.latents.shape[0],) + latents.latents.shape[2:]
     ours = json.loads(scheduler_json(dict(components.scheduler.config)))
@@ -88,20 +89,23 @@ def _check_latents(latents: LatentsArtifact, components: Components, inputs: Vid
     elif any(theirs.get(k) != ours.get(k) for k in ("prediction_type", "beta_schedule", "beta_start", "beta_end",
                                                      "num_train_timesteps")):
         problem = "inverted with another model's noise schedule"
+    else:
+        try:
+            sampling_timesteps(components, settings.steps, latents.timesteps.tolist())
+        except ValueError as err:
+            problem = str(err)
     if problem:
-        raise InputError("latents.h5", None, problem, "rerun pm-invert with this scene and these models")
+        raise InputError("latents.h5", None, problem, "rerun pm-invert with this scene and these models "
+                         "(enhance.diffusion.steps must divide the inverted step count)")
 
 
 def enhance_frames(components: Components, inputs: VideoInputs, latents: LatentsArtifact, prompt: str,
                    settings: DiffusionSettings) -> np.ndarray:
     """Enhanced frames (T, H, W, 3) u8 at the model's size, sampled from the inverted latents."""
-    _check_latents(latents, components, inputs, prompt)
-    try:
-        clean = sample(components, torch.from_numpy(latents.latents), latents.timesteps.tolist(),
-                       inputs.controls(components), components.encode_prompt(prompt),
-                       components.encode_prompt(settings.negative_prompt), settings)
-    except ValueError as err:
-        raise InputError("latents.h5", None, str(err), "rerun pm-invert, or change enhance.diffusion.steps") from None
+    _check_latents(latents, components, inputs, prompt, settings)
+    clean = sample(components, torch.from_numpy(latents.latents), latents.timesteps.tolist(),
+                   inputs.controls(components), components.encode_prompt(prompt),
+                   components.encode_prompt(settings.negative_prompt), settings)
     return np.concatenate([to_u8(components.decode_latents(chunk)) for chunk in clean.split(settings.frame_batch)])
 
 
