@@ -49,7 +49,9 @@ def look_at(eye, target) -> np.ndarray:
 def random_scene(seed: int, num_gaussians: int, width: int, height: int, *, channels: int = 3,
                  depth=(1.5, 4.0), spread: float = 0.9, scale=(0.01, 0.2), focal: float | None = None,
                  world_to_camera: np.ndarray | None = None, background: bool = False) -> Scene:
-    """Gaussians spread over the view at camera depths in ``depth``; log-uniform scales in ``scale`` (metres)."""
+    """G random Gaussians: camera depths uniform in ``depth`` (metres), means filling ``spread`` times
+    the field of view (over 1: some off screen), log-uniform scales in ``scale`` (metres), random
+    rotations, opacities and features; an off-centre principal point and unequal focal lengths."""
     g = torch.Generator().manual_seed(seed)
     focal = focal or 0.9 * max(width, height)
     z = torch.empty(num_gaussians).uniform_(*depth, generator=g)
