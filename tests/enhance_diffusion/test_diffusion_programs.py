@@ -44,7 +44,7 @@ def test_an_incomplete_folder_is_reported_with_what_it_lacks(tmp_path, saved_mod
     paths = scene_inputs()
     with pytest.raises(InputError) as err:
         load_components(load_scene(paths["scene"]).enhance.diffusion.models, paths["scene"], "cpu")
-    assert "stable_diffusion" in str(err.value) and "lacks unet, vae, text_encoder" in str(err.value)
+    assert "stable_diffusion" in str(err.value) and "lacks unet (config.json + weights), vae" in str(err.value)
     assert "controlnet_depth" not in str(err.value).split("missing model weights:")[1]
 
 

@@ -30,8 +30,9 @@ log = logging.getLogger("physmotion.diffusion")
 class ModelSpec:
     env: str
     repo: str  # Hugging Face repository id whose local cache is searched (and to download from elsewhere)
-    parts: tuple[str, ...]  # sub-folders holding a config and weights ("" = the folder itself)
+    models: tuple[str, ...]  # sub-folders holding config.json and weights ("" = the folder itself)
     layout: str
+    extras: tuple[str, ...] = ()  # further files or folders that must exist
 
 
 MODELS: Dict[str, ModelSpec] = {
@@ -39,7 +40,8 @@ MODELS: Dict[str, ModelSpec] = {
         "PHYSMOTION_SD_PATH", "stabilityai/stable-diffusion-2-1",
         ("unet", "vae", "text_encoder"),
         "a diffusers folder: model_index.json, scheduler/, tokenizer/, text_encoder/, unet/, vae/ "
-        "(each model folder with config.json and *.safetensors or *.bin)"),
+        "(each model folder with config.json and *.safetensors or *.bin)",
+        ("scheduler/scheduler_config.json", "tokenizer")),
     "controlnet_depth": ModelSpec(
         "PHYSMOTION_CONTROLNET_DEPTH", "thibaud/controlnet-sd21-depth-diffusers", ("",),
         "config.json and diffusion_pytorch_model.safetensors (or .bin)"),
@@ -57,16 +59,12 @@ def _models_file() -> Path:
 def _missing_parts(folder: Path, spec: ModelSpec) -> List[str]:
     """The parts of ``folder`` that lack a config or weights; empty when the folder is complete."""
     missing = []
-    for part in spec.parts:
+    for part in spec.models:
         sub = folder / part
         has_weights = any(sub.glob("*.safetensors")) or any(sub.glob("*.bin"))
         if not (sub / "config.json").is_file() or not has_weights:
-            missing.append(part or ".")
-    if spec.parts != ("",) and not (folder / "scheduler" / "scheduler_config.json").is_file():
-        missing.append("scheduler")
-    if spec.parts != ("",) and not (folder / "tokenizer").is_dir():
-        missing.append("tokenizer")
-    return missing
+            missing.append(f"{part or '.'} (config.json + weights)")
+    return missing + [extra for extra in spec.extras if not (folder / extra).exists()]
 
 
 def _cached_snapshot(repo: str) -> Optional[Path]:
@@ -111,7 +109,8 @@ def resolve_model_paths(models: DiffusionModels, scene_file: Path) -> Dict[str, 
             looked_text = "; ".join(looked) if looked else "no path given and not in the Hugging Face cache"
             problems.append(f"{name} ({looked_text}; expected {spec.layout}; "
                             f"e.g. `huggingface-cli download {spec.repo} --local-dir DIR` on a machine with "
-                            f"network, then set enhance.diffusion.models.{name}: DIR or ${spec.env}=DIR)")
+                            f"network, then set enhance.diffusion.models.{name}: DIR, ${spec.env}=DIR or "
+                            f"'{name}: DIR' in {_models_file()})")
     if problems:
         raise InputError(scene_file, "enhance.diffusion.models",
                          "the diffusion backend is missing model weights: " + " | ".join(problems),
