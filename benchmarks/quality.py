@@ -60,12 +60,13 @@ def _reconstruct(scene_file: Path, device: str, hard_depth: bool = True):
 
 def reconstruction_section(device: str) -> str:
     """The table of section '## reconstruct' of RESULTS.md."""
-    rows = ["| scene | Gaussians | masked PSNR (dB) | runtime (s) | depth median rel. error | side IoU | floater mass |",
-            "| --- | --- | --- | --- | --- | --- | --- |"]
+    rows = ["| scene | Gaussians | masked PSNR (dB) | runtime (s) | depth median rel. error | side IoU "
+            "| floater mass | median distance to surface |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for scene_file in sorted(ROOT.glob("scenes/*/scene.yaml")):
         scene, g, view, _, psnr, seconds = _reconstruct(scene_file, device)
         rows.append(f"| {scene_file.parent.name} ({view.camera.width}x{view.camera.height}, "
-                    f"{scene.reconstruct.iterations} it) | {len(g)} | {psnr:.2f} | {seconds:.0f} | | | |")
+                    f"{scene.reconstruct.iterations} it) | {len(g)} | {psnr:.2f} | {seconds:.0f} | | | | |")
     capsule = Capsule.tilted()
     with tempfile.TemporaryDirectory() as tmp:
         scene_file = write_scene(Path(tmp), capsule)
@@ -79,12 +80,13 @@ def reconstruction_section(device: str) -> str:
             side = splat.Camera(camera.K, side_view(capsule), camera.width, camera.height)
             side_truth = photograph(capsule, side.K, side.world_to_camera, side.width, side.height)
             side_iou = iou(_render(g, side, device).alpha.cpu().numpy() > 0.5, side_truth.mask)
-            far = np.abs(capsule.signed_distance(g.means)) > 0.02 * capsule.size_m
-            floaters = g.opacities[far].sum()
+            distance = np.abs(capsule.signed_distance(g.means))
+            floaters = g.opacities[distance > 0.02 * capsule.size_m].sum()
             rows.append(f"| capsule, hard depth {'on' if hard_depth else 'off'} ({camera.width}x{camera.height}, "
                         f"{scene.reconstruct.iterations} it) | {len(g)} | {psnr:.2f} | {seconds:.0f} | "
                         f"{100 * depth_error:.2f} % | {side_iou:.3f} | {floaters:.1f} "
-                        f"({100 * floaters / g.opacities.sum():.2f} % of all opacity) |")
+                        f"({100 * floaters / g.opacities.sum():.2f} % of all opacity) | "
+                        f"{1000 * np.median(distance):.1f} mm |")
     return "\n".join(rows)
 
 

@@ -51,17 +51,24 @@ def _patches(image: torch.Tensor, size: int, offset: tuple[int, int]) -> torch.T
     return F.unfold(cropped[None, None], kernel_size=size, stride=size)[0].T
 
 
+def patch_range(valid: torch.Tensor) -> tuple[int, int]:
+    """Patch sizes (pixels) for an object of ``valid`` pixels: a tenth to a quarter of its side, so that
+    patches fit inside it at any resolution (DNGaussian's fixed range assumes ~500-pixel scenes)."""
+    side = float(valid.sum()) ** 0.5
+    return max(3, int(side / 10)), max(4, int(side / 4))
+
+
 def hard_depth_loss(rendered: torch.Tensor, prior: torch.Tensor, valid: torch.Tensor,
-                    rng: np.random.Generator, patch_range: tuple[int, int] = (8, 24),
-                    global_weight: float = 0.1) -> torch.Tensor:
+                    rng: np.random.Generator, global_weight: float = 0.1) -> torch.Tensor:
     """Eq. 7 summed over patches: DNGaussian's local + global patch-normalised depth difference.
 
     Each patch of the rendered hard depth and of the prior depth is centred on
     its own mean; the local term divides by the patch's own standard deviation,
     the global term by the standard deviation over all valid pixels of that
     image. Only the shape within a patch is compared, so the prior's unknown
-    scale and offset do not matter. Patch size and grid offset are drawn from
-    ``rng`` each call, so patch borders do not stay in one place.
+    scale and offset do not matter. Patch size (``patch_range``) and grid
+    offset are drawn from ``rng`` each call, so patch borders do not stay in
+    one place; only patches wholly inside ``valid`` count.
 
     Args:
         rendered, prior: (H,W) depths in metres; ``prior`` may hold NaN where ``valid`` is False.
@@ -69,7 +76,8 @@ def hard_depth_loss(rendered: torch.Tensor, prior: torch.Tensor, valid: torch.Te
     Returns:
         scalar; zero (without gradient) when no patch fits.
     """
-    size = int(rng.integers(patch_range[0], patch_range[1] + 1))
+    smallest, largest = patch_range(valid)
+    size = int(rng.integers(smallest, largest + 1))
     height, width = valid.shape
     if min(height, width) < size:
         return rendered.sum() * 0
