@@ -47,5 +47,6 @@ def test_sphere_prior_is_close_to_a_ray_cast_sphere_and_has_size_m():
     assert thickness == pytest.approx(2 * radius_m, rel=0.07)  # the silhouette is 40 px: +-1 px each side
     prior = depth_prior_image(depths, K)
     assert np.isnan(prior[~mask]).all() and np.isfinite(prior[mask]).all()
-    assert np.median(np.abs(prior[mask] - truth[mask]) / truth[mask]) < 0.01
+    # the 40-pixel silhouette measures its extent to about a pixel: 2-3 % in distance
+    assert np.median(np.abs(prior[mask] - truth[mask]) / truth[mask]) < 0.03
     assert (depths[0].back[mask] >= depths[0].front[mask]).all()
