@@ -352,7 +352,10 @@ def stage_keys(scene: Scene, stage: str) -> dict:
                 "pitch_deg": data["camera"]["pitch_deg"]}
     if stage == "render":
         return {"render": data["render"]}
-    if stage in ("lora", "invert", "enhance"):
+    if stage == "lora":  # trains on the object and the extra views
+        return {"prompt": data["prompt"], "enhance": data["enhance"],
+                "extra_views": data["reconstruct"]["extra_views"]}
+    if stage in ("invert", "enhance"):
         return {"prompt": data["prompt"], "enhance": data["enhance"]}
     raise ValueError(f"unknown stage {stage!r}")
 

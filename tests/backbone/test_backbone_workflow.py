@@ -138,3 +138,15 @@ def test_killed_stage_leaves_no_artifact(tmp_path):
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
     assert not out.exists()
+
+
+def test_diffusion_scene_plans_lora_and_invert(tmp_path):
+    scene = write_scene(tmp_path / "scenes" / "tiny")
+    raw = yaml.safe_load(scene.read_text())
+    raw["enhance"] = {"backend": "diffusion", "diffusion": {"lora": {"enabled": True}}}
+    scene.write_text(yaml.safe_dump(raw))
+    assert planned_jobs(tmp_path) == {"reconstruct": 1, "simulate": 1, "render": 1, "lora": 1, "invert": 1,
+                                      "enhance": 1}
+    raw["enhance"]["diffusion"]["lora"]["enabled"] = False
+    scene.write_text(yaml.safe_dump(raw))
+    assert "lora" not in planned_jobs(tmp_path)

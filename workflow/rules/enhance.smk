@@ -23,6 +23,7 @@ def optional_flag(flag, files):
 rule lora:
     input:
         gaussians=RESULTS / "{scene}" / "gaussians.h5",
+        extra_views=lambda w: [str(v.image) for v in scene(w.scene).reconstruct.extra_views],
     output:
         directory(RESULTS / "{scene}" / "lora"),
     params:
