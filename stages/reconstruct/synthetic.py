@@ -26,7 +26,8 @@ class Capsule:
 
     @staticmethod
     def tilted(distance: float = 0.6, size_m: float = 0.25, radius: float = 0.05, tilt_deg: float = 20.0) -> "Capsule":
-        """A capsule ``size_m`` long overall, ``distance`` in front of the camera, its axis turned in the image plane."""
+        """A capsule ``size_m`` long overall, ``distance`` in front of the camera, its axis turned in the
+        image plane by ``tilt_deg``."""
         half = size_m / 2 - radius
         t = math.radians(tilt_deg)
         return Capsule(np.array([0.0, 0.0, distance]), half * np.array([math.cos(t), math.sin(t), 0.0]), radius)

@@ -67,8 +67,8 @@ def test_extra_view_enters_the_hard_depth_loss(tmp_path):
     K = intrinsics_from_fov(30, 80, 80)
     side = photograph(capsule, K, side_view(capsule, 90), 80, 80)
     cv2.imwrite(str(tmp_path / "side.png"), np.where(side.mask[..., None], side.rgb, 255).astype(np.uint8))
-    text = scene.read_text().replace("iterations: 12}", "iterations: 12, extra_views: [{image: side.png, azimuth_deg: 90}]}")
-    scene.write_text(text)
+    scene.write_text(scene.read_text().replace(
+        "iterations: 12}", "iterations: 12, extra_views: [{image: side.png, azimuth_deg: 90}]}"))
     main(["--scene", str(scene), "--out", str(tmp_path / "g.h5"), "--device", "cpu"])
     g = read_artifact(tmp_path / "g.h5", GaussiansArtifact)
     assert np.isfinite(g.loss[:, 3]).sum() == 1 and g.loss[np.isfinite(g.loss[:, 3]), 3][0] > 0
