@@ -10,10 +10,10 @@ import warp as _wp
 
 _wp.init()  # from_torch and launches need the runtime; init is idempotent
 
-from .camera import Camera  # noqa: E402
-from .covariance import covariances_from_scales_rotations  # noqa: E402
-from .ply import GaussianCloud, read_ply, write_ply  # noqa: E402
-from .rasterize import Render, rasterize  # noqa: E402
+from .camera import Camera
+from .covariance import covariances_from_scales_rotations
+from .ply import GaussianCloud, read_ply, write_ply
+from .rasterize import Render, rasterize
 
-__all__ = ["Camera", "Render", "rasterize", "covariances_from_scales_rotations",
-           "GaussianCloud", "read_ply", "write_ply"]
+__all__ = ["Camera", "GaussianCloud", "Render", "covariances_from_scales_rotations", "rasterize", "read_ply",
+           "write_ply"]

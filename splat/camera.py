@@ -57,7 +57,7 @@ class Camera:
         """(cx, cy) in pixels."""
         return float(self.K[0, 2]), float(self.K[1, 2])
 
-    def scaled_to_width(self, width: int) -> "Camera":
+    def scaled_to_width(self, width: int) -> Camera:
         """The same camera rendering ``width`` pixels wide.
 
         Artifacts store K at the photograph's full size; rendering at width w

@@ -70,9 +70,10 @@ def composite_kernels(channels: int):
         py = float(row) + 0.5
         tile = tile_ids[t]
         end = tile_offsets[tile]
-        transmittance = float(1.0)
+        # Typed constructors: Warp only lets variables declared this way change inside a loop.
+        transmittance = float(1.0)  # noqa: UP018
         color = vec_c()
-        depth = float(0.0)
+        depth = float(0.0)  # noqa: UP018
         for n in range(tile_offsets[tile], tile_offsets[tile + 1]):
             power = splat_power(means2d[n], conics[n], px, py)
             if power < power_floors[n]:  # surely below 1/255: skip the exp

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from plyfile import PlyData, PlyElement
+from plyfile import PlyData, PlyElement, PlyParseError
 
 from schemas.program import InputError
 
@@ -43,7 +43,7 @@ class GaussianCloud:
 
     means (G, 3) metres; scales (G, 3) linear standard deviations, metres;
     rotations (G, 4) unit quaternions (w, x, y, z); opacities (G,) in [0, 1];
-    colors (G, 3) sRGB in [0, 1].
+    colors (G, 3) sRGB in [0, 1] (read as stored, not clipped).
     """
 
     means: np.ndarray
@@ -63,7 +63,7 @@ def read_ply(path: str | Path) -> GaussianCloud:
         raise InputError(path, None, "the file does not exist", "check the path (reconstruct.init_ply)") from None
     except KeyError:
         raise InputError(path, "vertex", "the PLY has no 'vertex' element", fix) from None
-    except Exception as err:  # plyfile raises several types for malformed headers and bodies
+    except (PlyParseError, ValueError) as err:  # malformed header or body; ValueError covers bad bytes
         raise InputError(path, None, f"not a readable PLY file ({err})", fix) from None
 
     names = set(vertices.dtype.names)

@@ -99,7 +99,7 @@ class _CameraArgs:
     tan_lim_high: wp.vec2
 
     @classmethod
-    def of(cls, camera: Camera) -> "_CameraArgs":
+    def of(cls, camera: Camera) -> _CameraArgs:
         (fx, fy), (cx, cy) = camera.focal, camera.principal_point
         # gsplat's limits: the image's own half-extents plus (FOV_CLAMP - 1) of the half field of view.
         margin_x = (FOV_CLAMP - 1.0) * 0.5 * camera.width / fx

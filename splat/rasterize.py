@@ -1,7 +1,7 @@
 """The public entry point: project, bin, composite."""
 from __future__ import annotations
 
-from typing import NamedTuple, Optional
+from typing import NamedTuple
 
 import torch
 
@@ -31,8 +31,8 @@ def _check(name: str, tensor: torch.Tensor, shape: tuple, device: torch.device) 
 
 @torch_single_threaded()
 def rasterize(means: torch.Tensor, opacities: torch.Tensor, features: torch.Tensor, camera: Camera, *,
-              scales: Optional[torch.Tensor] = None, rotations: Optional[torch.Tensor] = None,
-              covariances: Optional[torch.Tensor] = None, background: Optional[torch.Tensor] = None,
+              scales: torch.Tensor | None = None, rotations: torch.Tensor | None = None,
+              covariances: torch.Tensor | None = None, background: torch.Tensor | None = None,
               hard_depth: bool = False, delta: float = 0.95) -> Render:
     """Render 3D Gaussians with standard 3DGS semantics, differentiably.
 
@@ -61,10 +61,10 @@ def rasterize(means: torch.Tensor, opacities: torch.Tensor, features: torch.Tens
     opacities = _check("opacities", opacities, (G,), device)
     features = _check("features", features, (G, None), device)
     if covariances is None:
-        shape = dict(scales=_check("scales", scales, (G, 3), device),
-                     rotations=_check("rotations", rotations, (G, 4), device))
+        shape = {"scales": _check("scales", scales, (G, 3), device),
+                 "rotations": _check("rotations", rotations, (G, 4), device)}
     else:
-        shape = dict(covariances=_check("covariances", covariances, (G, 3, 3), device))
+        shape = {"covariances": _check("covariances", covariances, (G, 3, 3), device)}
     C = features.shape[1]
     background = torch.zeros(C, device=device) if background is None else _check("background", background, (C,),
                                                                                    device)

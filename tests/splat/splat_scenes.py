@@ -5,9 +5,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
+from splat_reference import ReferenceRender, reference_covariances, render_reference
 
 import splat
-from splat_reference import ReferenceRender, reference_covariances, render_reference
 
 DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
 
@@ -29,7 +29,7 @@ class Scene:
     def camera(self) -> splat.Camera:
         return splat.Camera(self.K, self.world_to_camera, self.width, self.height)
 
-    def with_(self, **changes) -> "Scene":
+    def with_(self, **changes) -> Scene:
         return replace(self, **changes)
 
 
@@ -72,7 +72,9 @@ def random_scene(seed: int, num_gaussians: int, width: int, height: int, *, chan
 
 
 def render_warp(scene: Scene, device: str = "cpu", **kwargs) -> splat.Render:
-    to = lambda x: None if x is None else x.to(device)  # noqa: E731
+    def to(x):
+        return None if x is None else x.to(device)
+
     return splat.rasterize(to(scene.means), to(scene.opacities), to(scene.features), scene.camera,
                            scales=to(scene.scales), rotations=to(scene.rotations),
                            background=to(scene.background), **kwargs)

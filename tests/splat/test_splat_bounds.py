@@ -33,6 +33,6 @@ print("in bounds")
 def test_kernels_stay_in_bounds_in_debug_mode():
     here = str(Path(__file__).parent)
     result = subprocess.run([sys.executable, "-c", SCRIPT.format(here=here)], capture_output=True, text=True,
-                            timeout=600)
+                            timeout=600, check=False)
     assert result.returncode == 0 and "in bounds" in result.stdout, result.stderr[-3000:]
     assert "Assertion failed" not in result.stderr, result.stderr[-3000:]

@@ -2,10 +2,17 @@
 import numpy as np
 import pytest
 import torch
+from splat_scenes import (
+    DEVICES,
+    assert_matches_oracle,
+    look_at,
+    random_scene,
+    render_oracle,
+    render_warp,
+)
 
 import splat
 from splat import composite
-from splat_scenes import DEVICES, assert_matches_oracle, look_at, random_scene, render_oracle, render_warp
 
 
 @pytest.mark.parametrize("device", DEVICES)

@@ -1,10 +1,10 @@
 """Gradients of the Warp path against the float64 oracle's autograd and against central differences."""
 import pytest
 import torch
-
-import splat
 from splat_reference import reference_covariances, render_reference
 from splat_scenes import DEVICES, look_at, random_scene, render_oracle
+
+import splat
 
 INPUTS = ["means", "opacities", "features", "scales", "rotations", "background"]
 
@@ -41,9 +41,9 @@ def _warp_gradients(scene, weights, device="cpu", covariance_input=False, **kwar
     if covariance_input:
         leaves["covariances"] = splat.covariances_from_scales_rotations(scene.scales, scene.rotations).to(
             device).requires_grad_()
-        shape = dict(covariances=leaves["covariances"])
+        shape = {"covariances": leaves["covariances"]}
     else:
-        shape = dict(scales=leaves["scales"], rotations=leaves["rotations"])
+        shape = {"scales": leaves["scales"], "rotations": leaves["rotations"]}
     out = splat.rasterize(leaves["means"], leaves["opacities"], leaves["features"], scene.camera,
                           background=leaves["background"], **shape, **kwargs)
     _weighted(out, weights).backward()
