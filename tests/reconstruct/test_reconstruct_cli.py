@@ -101,3 +101,23 @@ def test_init_ply_is_placed_onto_the_mask(tmp_path, artifact_path):
     # blurred rims, not the mask, are the reference).
     assert iou(silhouette(placed), silhouette(g)) > 0.85
     assert (placed.means.max(0) - placed.means.min(0)).max() == pytest.approx(0.25, rel=1e-3)
+
+
+def test_two_objects_get_their_own_gaussians_and_depths(tmp_path):
+    K = intrinsics_from_fov(40, 64, 48)
+    left, right = (photograph(Capsule(np.array([x, 0.0, 0.6]), np.array([0.0, 0.04, 0.0]), 0.03), K, np.eye(4), 64, 48)
+                   for x in (-0.1, 0.1))
+    cv2.imwrite(str(tmp_path / "photo.png"), np.where(left.mask[..., None], left.rgb, right.rgb))
+    for name, shot in (("left.png", left), ("right.png", right)):
+        cv2.imwrite(str(tmp_path / name), shot.mask.astype(np.uint8) * 255)
+    (tmp_path / "scene.yaml").write_text(
+        "image: photo.png\nobjects:\n  - {mask: left.png, size_m: 0.14}\n  - {mask: right.png, size_m: 0.28}\n"
+        "reconstruct: {resolution: 64, iterations: 2}\n")
+    main(["--scene", str(tmp_path / "scene.yaml"), "--out", str(tmp_path / "g.h5"), "--device", "cpu"])
+    g = read_artifact(tmp_path / "g.h5", GaussiansArtifact)
+    assert set(np.unique(g.mask)) == {0, 1, 2} and set(np.unique(g.object_id)) == {0, 1}
+    # Same silhouette size, twice the size_m: the second object is placed twice as far away.
+    ratio = np.nanmedian(g.depth_prior[g.mask == 2]) / np.nanmedian(g.depth_prior[g.mask == 1])
+    assert ratio == pytest.approx(2.0, rel=0.05)
+    depth = [np.median(g.means[g.object_id == k, 2]) for k in (0, 1)]
+    assert depth[1] / depth[0] == pytest.approx(2.0, rel=0.05)
