@@ -19,6 +19,10 @@ from .geometry import pixel_rays
 from .local_model import require_model_folder
 
 
+EDGE_OFFSET_PX = 0.3
+"""Mean distance (pixels) from the silhouette edge to the nearest outside pixel centre."""
+
+
 def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     """Half the object's thickness (H,W) in pixels, 0 off the mask, from round cross-sections.
 
@@ -28,7 +32,10 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     """
     padded = np.pad(mask.astype(bool), 1)  # objects cut by the image border close at the border
     dist, nearest = ndimage.distance_transform_edt(padded, return_indices=True)
-    dist = np.where(padded, dist - 0.5, 0.0)  # to the silhouette edge, half a pixel before the outside centre
+    # To the silhouette edge: it lies between the last inside and the first outside pixel centre, on
+    # average 0.5 px before the latter on straight axis-aligned edges and 0.2-0.35 px on curved ones
+    # (measured on ray-cast discs); 0.3 balances the two.
+    dist = np.where(padded, dist - EDGE_OFFSET_PX, 0.0)
     rows, cols = np.indices(padded.shape)
     to_edge = np.stack([nearest[0] - rows, nearest[1] - cols]).astype(np.float64)
     to_edge /= np.maximum(np.linalg.norm(to_edge, axis=0), 1e-9)
@@ -44,8 +51,8 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     if not axis.any():  # a one-pixel-wide mask
         axis = padded.copy()
     _, axis_index = ndimage.distance_transform_edt(~axis, return_indices=True)
-    # The flagged pixels straddle the true axis, up to a pixel off its crest: take the crest nearby.
-    radius = ndimage.maximum_filter(dist, size=3)[axis_index[0], axis_index[1]]
+    # Flagged pixels come in pairs straddling the true axis, each about half a pixel from it.
+    radius = dist[axis_index[0], axis_index[1]] + 0.5
     d = np.minimum(dist, radius)
     half = np.sqrt(np.maximum(radius ** 2 - (radius - d) ** 2, 0.0))
     return np.where(padded, half, 0.0)[1:-1, 1:-1]
