@@ -6,6 +6,9 @@ from transformers import (DPTConfig, DPTForDepthEstimation, DPTImageProcessor, S
                           SamModel, SamProcessor, SamPromptEncoderConfig, SamVisionConfig)
 
 from schemas import InputError
+from schemas.artifacts import GaussiansArtifact, read_artifact
+from stages.reconstruct.cli import main
+from stages.reconstruct.synthetic import Capsule, write_scene
 from stages.reconstruct.depth import DptDepth, unit_distance_shape
 from stages.reconstruct.segment import SamSegmenter
 
@@ -68,3 +71,15 @@ def test_sam_backend_returns_a_mask_of_the_photo(tiny_sam):
     photo = np.random.default_rng(1).integers(0, 255, (48, 64, 3), dtype=np.uint8)
     mask = SamSegmenter(tiny_sam).segment(photo, (8, 8, 40, 36))
     assert mask.shape == (48, 64) and mask.dtype == bool
+
+
+def test_program_runs_with_both_model_backends(tiny_dpt, tiny_sam, tmp_path):
+    scene = write_scene(tmp_path, Capsule.tilted(), width=64, height=48, iterations=2)
+    # A box instead of the mask, so that SAM segments the object.
+    scene.write_text(scene.read_text().replace("mask: mask.png", "box: [8, 6, 56, 42]"))
+    main(["--scene", str(scene), "--out", str(tmp_path / "g.h5"), "--device", "cpu",
+          "--depth-model", str(tiny_dpt), "--sam-model", str(tiny_sam)])
+    g = read_artifact(tmp_path / "g.h5", GaussiansArtifact)
+    on = g.mask > 0
+    assert on.any() and np.isfinite(g.depth_prior[on]).all() and np.isnan(g.depth_prior[~on]).all()
+    assert len(g.means) > 0
