@@ -1,7 +1,7 @@
 """Write the images of the example scenes (committed; rerun to regenerate them).
 
 - coffee/: scikit-image's `coffee` photograph, the cup picked by a box (GrabCut).
-- logo/:   scikit-image's RGBA `logo`, whose alpha is the mask.
+- logo/:   scikit-image's `logo`, given the alpha of its disc, which is the mask.
 - ball/:   a textured ball on a table, drawn here, with its mask file.
 
 Usage: python scenes/make_examples.py
@@ -24,8 +24,17 @@ def coffee() -> None:
     write_rgb(HERE / "coffee" / "photo.png", photo)
 
 
-def logo() -> None:
-    rgba = cv2.resize(skimage.data.logo(), (256, 256), interpolation=cv2.INTER_AREA)
+def logo(size: int = 256) -> None:
+    """The bundled logo is opaque everywhere; give it the alpha of its disc (anti-aliased), so
+    that the image alpha is the object's mask."""
+    rgb = cv2.resize(skimage.data.logo()[..., :3], (size, size), interpolation=cv2.INTER_AREA)
+    ink = rgb.min(axis=2) < 245  # everything that is not the white page
+    rows, cols = np.nonzero(ink)
+    centre, radius = np.array([cols.mean(), rows.mean()]) + 0.5, np.sqrt(ink.sum() / np.pi)
+    r, c = np.mgrid[0:size, 0:size] + 0.5
+    distance = np.hypot(c - centre[0], r - centre[1])
+    alpha = np.clip(radius - distance + 0.5, 0, 1)  # one-pixel anti-aliased edge
+    rgba = np.dstack([rgb, np.round(alpha * 255).astype(np.uint8)])
     cv2.imwrite(str(HERE / "logo" / "logo.png"), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
 
 
