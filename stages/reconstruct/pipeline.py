@@ -16,10 +16,15 @@ from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
 from .geometry import intrinsics_from_fov, working_size
 from .lift import Gaussians, lift_object
 from .optimize import Settings, optimize
+from .ply import place_ply
 from .segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
 from .views import extra_view, input_view
 
 log = logging.getLogger("physmotion.reconstruct")
+
+MAX_GAUSSIANS = 30000
+"""Initial Gaussians of all objects at most: keeps 600 iterations at 256 px within about 3 minutes
+on 2 CPU cores (benchmarks/RESULTS.md); larger objects are sampled every 2nd, 3rd... pixel."""
 
 
 @dataclass
@@ -72,17 +77,19 @@ def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depth
     K_work[:2] *= size[0] / width
     photo_work = downsample(photo, size)
     if scene.reconstruct.init_ply is not None:
-        from .ply import place_ply  # only when asked: it needs splat's PLY reader
-
         if len(scene.objects) != 1:
             raise InputError(scene.file, "reconstruct.init_ply", "an initial PLY describes one object but the "
                              f"scene has {len(scene.objects)}", "use init_ply with a single object, or remove it")
         return place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
-    parts = []
-    for k, d in enumerate(depths):
-        small = ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True))
-        parts.append(lift_object(small, K_work, photo_work, k))
-        log.info("object %d: %d initial Gaussians", k, len(parts[-1]))
+    small = [ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True))
+             for d in depths]
+    for stride in range(1, 9):  # the finest sampling within the budget
+        parts = [lift_object(d, K_work, photo_work, k, front_stride=stride, back_stride=2 * stride)
+                 for k, d in enumerate(small)]
+        if sum(map(len, parts)) <= MAX_GAUSSIANS:
+            break
+    for k, part in enumerate(parts):
+        log.info("object %d: %d initial Gaussians (front sampled every %d pixel(s))", k, len(part), stride)
     return Gaussians.concatenate(parts)
 
 
