@@ -12,8 +12,10 @@ One substep, one kernel per physical step:
 
 On the CPU each particle kernel is split into `n_parts` ranges launched from
 their own Python threads (a Warp CPU launch runs on one thread); P2G scatters
-each range into its own grid copy so the copies never race, and the grid
-update sums them.
+each range into its own grid copy (momentum and mass together, one vec4 per
+node) so the copies never race, and the grid update sums them. The grid
+update visits only the box of nodes that the particles' stencils touch
+(`stencil_node_box`), which is also all it needs to clear for the next P2G.
 """
 from __future__ import annotations
 
@@ -84,10 +86,12 @@ def particle_to_grid(
     dx: float,
     dt: float,
     shape: wp.vec3i,
-    grid_momentum: wp.array4d(dtype=wp.vec3),
-    grid_mass: wp.array4d(dtype=float),
+    grid_momentum_mass: wp.array4d(dtype=wp.vec4),
 ):
-    """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid."""
+    """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
+
+    Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4.
+    """
     p = wp.tid() + start
     inv_dx = 1.0 / dx
     base, fx = stencil_base(x[p], origin, inv_dx, shape)
@@ -97,15 +101,36 @@ def particle_to_grid(
     m = mass[p]
     # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
     affine = m * C[p] - (4.0 * dt * inv_dx * inv_dx) * volume_stress[p]
-    momentum = m * v[p] + dt * force[p]
+    # x_i - x_p = dx ((i, j, k) - fx), so the node momentum is linear in (i, j, k): start from the
+    # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
+    step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
+    corner = m * v[p] + dt * force[p] - dx * (affine * fx)
     for i in range(3):
+        momentum_i = corner + float(i) * step[0]
         for j in range(3):
+            momentum_ij = momentum_i + float(j) * step[1]
+            w_ij = wx[i] * wy[j]
             for k in range(3):
-                w = wx[i] * wy[j] * wz[k]
-                offset = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
-                wp.atomic_add(grid_momentum, part, node[0], node[1], node[2], w * (momentum + affine * offset))
-                wp.atomic_add(grid_mass, part, node[0], node[1], node[2], w * m)
+                momentum = momentum_ij + float(k) * step[2]
+                w = w_ij * wz[k]
+                wp.atomic_add(grid_momentum_mass, part, base[0] + i, base[1] + j, base[2] + k,
+                              w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
+
+
+@wp.kernel
+def stencil_node_box(
+    x: wp.array(dtype=wp.vec3),
+    origin: wp.vec3,
+    dx: float,
+    shape: wp.vec3i,
+    corners: wp.array(dtype=wp.int32),
+):
+    """Smallest (corners[0:3]) and largest (corners[3:6]) stencil corner node of all particles per axis."""
+    p = wp.tid()
+    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
+    for a in range(3):
+        wp.atomic_min(corners, a, base[a])
+        wp.atomic_max(corners, 3 + a, base[a])
 
 
 @wp.func
@@ -147,8 +172,7 @@ def grid_update(
     ground_kind: int,
     ground_node: int,
     friction: float,
-    grid_momentum: wp.array4d(dtype=wp.vec3),
-    grid_mass: wp.array4d(dtype=float),
+    grid_momentum_mass: wp.array4d(dtype=wp.vec4),
     grid_velocity: wp.array3d(dtype=wp.vec3),
 ):
     """v_i = (sum of momenta) / (sum of masses) + dt g, then ground and walls; clears the P2G copies."""
@@ -156,16 +180,14 @@ def grid_update(
     i += offset[0]
     j += offset[1]
     k += offset[2]
-    momentum = wp.vec3(0.0)
-    m = float(0.0)
+    total = wp.vec4(0.0)
     for part in range(n_parts):
-        momentum += grid_momentum[part, i, j, k]
-        m += grid_mass[part, i, j, k]
-        grid_momentum[part, i, j, k] = wp.vec3(0.0)
-        grid_mass[part, i, j, k] = 0.0
+        total += grid_momentum_mass[part, i, j, k]
+        grid_momentum_mass[part, i, j, k] = wp.vec4(0.0)
+    m = total[3]
     v = wp.vec3(0.0)
     if m > 0.0:
-        v = momentum / m + dt * gravity
+        v = wp.vec3(total[0], total[1], total[2]) / m + dt * gravity
         if ground_kind != GROUND_NONE and j <= ground_node:
             v = ground_contact(v, ground_kind, friction)
         v = wall_slip(v, wp.vec3i(i, j, k), shape)
@@ -194,17 +216,35 @@ def grid_to_particle(
     wx = quadratic_weights(fx[0])
     wy = quadratic_weights(fx[1])
     wz = quadratic_weights(fx[2])
+    # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
+    ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
+    oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
+    oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
+    # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
+    # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
     vp = wp.vec3(0.0)
-    B = wp.mat33(0.0)
+    Bx = wp.vec3(0.0)
+    By = wp.vec3(0.0)
+    Bz = wp.vec3(0.0)
     for i in range(3):
+        v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
+        vy_i = wp.vec3(0.0)  # ... of oy wz v
+        vz_i = wp.vec3(0.0)  # ... of wy oz v
         for j in range(3):
+            v_ij = wp.vec3(0.0)  # sum over k of wz v
+            vz_ij = wp.vec3(0.0)  # ... of oz v
             for k in range(3):
-                w = wx[i] * wy[j] * wz[k]
                 vi = grid_velocity[base[0] + i, base[1] + j, base[2] + k]
-                offset = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                vp += w * vi
-                B += w * wp.outer(vi, offset)
-    Cp = (4.0 * inv_dx * inv_dx) * B
+                v_ij += wz[k] * vi
+                vz_ij += oz[k] * vi
+            v_i += wy[j] * v_ij
+            vy_i += oy[j] * v_ij
+            vz_i += wy[j] * vz_ij
+        vp += wx[i] * v_i
+        Bx += ox[i] * v_i
+        By += wx[i] * vy_i
+        Bz += wx[i] * vz_i
+    Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
     if prescribed[p] != 0:
         vp = prescribed_velocity[p]  # velocity and fixed conditions override the grid
     # keep particles off the wall layer so every stencil stays on the grid
@@ -261,14 +301,15 @@ class MPMSolver:
         self.rigid = None
 
         nx, ny, nz = grid.shape
-        self.grid_momentum = wp.zeros((self.n_parts, nx, ny, nz), dtype=wp.vec3, device=device)
-        self.grid_mass = wp.zeros((self.n_parts, nx, ny, nz), dtype=float, device=device)
+        self.grid_momentum_mass = wp.zeros((self.n_parts, nx, ny, nz), dtype=wp.vec4, device=device)
         self.grid_velocity = wp.zeros((nx, ny, nz), dtype=wp.vec3, device=device)
         self._origin = wp.vec3(*np.asarray(grid.origin, np.float32))
         self._shape = wp.vec3i(nx, ny, nz)
         # particle ranges, one per thread
         self._ranges = _split(n, self.n_parts)
         self._pool = ThreadPoolExecutor(self.n_parts) if self.n_parts > 1 else None
+        self._corners = wp.zeros(6, dtype=wp.int32, device=device)  # stencil_node_box's output
+        self._no_corners = np.array([nx, ny, nz, -1, -1, -1], np.int32)  # its start: an empty box
         wp.load_module("stages.simulate", device=device, recursive=True)  # compile before threads race to
 
     def _parallel(self, launches):
@@ -291,28 +332,29 @@ class MPMSolver:
 
         On the CPU only these nodes are updated (and cleared for the next
         P2G), a few percent of the grid for a compact object; on a GPU the
-        whole grid is cheaper than the host round trip.
+        whole grid is cheaper than the host round trip. The box comes from a
+        kernel pass over the particles (a numpy pass cost ten times more).
         """
         shape = np.array(self.grid.shape)
         if not wp.get_device(self.device).is_cpu:
             return np.zeros(3, int), shape
-        cells = (self.x.numpy() - np.asarray(self.grid.origin, np.float32)) / self.grid.dx - 0.5
-        lo = np.clip(np.floor(cells.min(axis=0)).astype(int), 0, shape - 3)
-        hi = np.clip(np.floor(cells.max(axis=0)).astype(int), 0, shape - 3) + 3
-        return lo, hi
+        self._corners.assign(self._no_corners)
+        wp.launch(stencil_node_box, dim=self.n_particles, device=self.device,
+                  inputs=[self.x, self._origin, self.grid.dx, self._shape, self._corners])
+        corners = self._corners.numpy()
+        return corners[:3].astype(int), corners[3:].astype(int) + 3
 
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
         g, dev = self.grid, self.device
         self._per_particle(particle_to_grid, lambda s, part: [
             s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.grid_momentum, self.grid_mass])
+            self._origin, g.dx, dt, self._shape, self.grid_momentum_mass])
         lo, hi = self._active_nodes()
         self._parallel([
             (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
                 wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape, self.ground.kind,
-                self.ground.ground_node, self.ground.friction, self.grid_momentum, self.grid_mass,
-                self.grid_velocity]))
+                self.ground.ground_node, self.ground.friction, self.grid_momentum_mass, self.grid_velocity]))
             for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
         ])
         self._per_particle(grid_to_particle, lambda s, part: [
