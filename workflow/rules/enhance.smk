@@ -33,9 +33,13 @@ rule lora:
         RESULTS / "{scene}" / "logs" / "lora.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "lora.tsv"
+    container:
+        image("enhance")
     threads: 2
     resources:
         mem_mb=16000,
+        runtime=240,
+        gpu=GPU,
     shell:
         "pm-lora --scene {params.scene} --gaussians {input.gaussians} --out {output} --device " + DEVICE + " > {log} 2>&1"
 
@@ -53,9 +57,13 @@ rule invert:
         RESULTS / "{scene}" / "logs" / "invert.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "invert.tsv"
+    container:
+        image("enhance")
     threads: 2
     resources:
         mem_mb=16000,
+        runtime=240,
+        gpu=GPU,
     shell:
         "pm-invert --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}{params.lora}"
         " --out {output} --device " + DEVICE + " > {log} 2>&1"
@@ -76,9 +84,14 @@ rule enhance:
         RESULTS / "{scene}" / "logs" / "enhance.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "enhance.tsv"
+    container:
+        image("enhance")
     threads: 2
+    # The flow backend is OpenCV on the CPU; only diffusion wants a GPU, and for longer.
     resources:
         mem_mb=8000,
+        runtime=lambda w: 240 if uses_diffusion(w.scene) else 30,
+        gpu=lambda w: GPU if uses_diffusion(w.scene) else 0,
     shell:
         "pm-enhance --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}"
         "{params.latents}{params.lora} --out {output.video} --device " + DEVICE + " > {log} 2>&1"

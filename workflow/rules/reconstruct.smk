@@ -18,8 +18,12 @@ rule reconstruct:
         RESULTS / "{scene}" / "logs" / "reconstruct.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "reconstruct.tsv"
+    container:
+        image("reconstruct")
     threads: 2
     resources:
         mem_mb=4000,
+        runtime=60,
+        gpu=GPU,
     shell:
         "pm-reconstruct --scene {params.scene} --out {output} --device " + DEVICE + " > {log} 2>&1"

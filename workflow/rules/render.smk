@@ -12,9 +12,13 @@ rule render:
         RESULTS / "{scene}" / "logs" / "render.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "render.tsv"
+    container:
+        image("simulate")
     threads: 2
     resources:
         mem_mb=4000,
+        runtime=30,
+        gpu=GPU,
     shell:
         "pm-render --scene {params.scene} --gaussians {input.gaussians} --trajectories {input.trajectories}"
         " --out {output.coarse} --video {output.video} --device " + DEVICE + " > {log} 2>&1"

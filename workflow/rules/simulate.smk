@@ -11,9 +11,13 @@ rule simulate:
         RESULTS / "{scene}" / "logs" / "simulate.log",
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "simulate.tsv"
+    container:
+        image("simulate")
     threads: 2
     resources:
         mem_mb=4000,
+        runtime=120,
+        gpu=GPU,
     shell:
         "pm-simulate --scene {params.scene} --gaussians {input.gaussians} --out {output.trajectories}"
         " --device " + DEVICE + " > {log} 2>&1"
