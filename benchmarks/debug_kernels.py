@@ -9,10 +9,12 @@ an out-of-bounds access aborts the process with the failed check.
 
 First it proves that the checks are live: a kernel that reads one past the end
 of an array must abort a child process. Then it simulates a few frames of
-small scenes that together reach every simulate kernel: all eight material
-presets side by side in the wall layer's corner of a walled domain, with
-impulse, velocity, force, torque and fixed conditions, a rigid body and
-friction ground. Exit status 0 means no kernel indexed out of bounds.
+two small scenes that together reach every simulate kernel, with the solver's
+two-thread split: all eight material presets side by side in a walled domain
+with impulse, velocity, force, torque and fixed conditions and friction
+ground; and a cube thrown into the domain's corner, so that particles are
+held at the wall layer and stencils reach the grid's edge. Exit status 0
+means no kernel indexed out of bounds.
 """
 from __future__ import annotations
 
