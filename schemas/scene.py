@@ -57,6 +57,10 @@ class ReconstructConfig(_Strict):
     iterations: int = Field(600, ge=0, description="optimisation iterations (paper: 3000)")
     init_ply: Optional[Path] = Field(None, description="3DGS PLY from another tool as the initial Gaussians")
     extra_views: List[ExtraView] = Field(default_factory=list, description="extra views for the hard-depth loss (Eq. 9)")
+    sam_model: Optional[Path] = Field(None, description="folder of a transformers SAM model: boxes are refined by SAM "
+                                      "instead of GrabCut (else env PHYSMOTION_SAM_MODEL)")
+    depth_model: Optional[Path] = Field(None, description="folder of a transformers DPT/MiDaS model for the depth prior "
+                                        "instead of silhouette inflation (else env PHYSMOTION_DEPTH_MODEL)")
 
 
 class GroundConfig(_Strict):
@@ -260,6 +264,15 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
     for k, obj in enumerate(scene.objects):
         if obj.mask is not None:
             obj.mask = check(obj.mask, f"objects[{k}].mask")
+    for key in ("sam_model", "depth_model"):
+        folder_path = getattr(scene.reconstruct, key)
+        if folder_path is not None:
+            full = folder_path if folder_path.is_absolute() else folder / folder_path
+            if not full.is_dir():
+                raise InputError(folder / "scene.yaml", f"reconstruct.{key}", f"model folder '{folder_path}' does "
+                                 "not exist", "give the folder a transformers model was saved to (save_pretrained), "
+                                 "or remove the key to use the built-in method")
+            setattr(scene.reconstruct, key, full.resolve())
     if scene.reconstruct.init_ply is not None:
         scene.reconstruct.init_ply = check(scene.reconstruct.init_ply, "reconstruct.init_ply")
     for i, view in enumerate(scene.reconstruct.extra_views):

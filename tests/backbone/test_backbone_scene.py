@@ -144,3 +144,12 @@ def test_example_scenes_are_valid():
 def test_exported_json_schema_is_current():
     committed = json.loads((REPO / "docs" / "scene.schema.json").read_text())
     assert committed == scene_json_schema(), "regenerate with: python -m schemas.export_schema"
+
+
+def test_model_folders_resolve_or_are_refused(tmp_path):
+    scene = tiny_scene_dict()
+    scene["reconstruct"]["depth_model"] = "models/dpt"
+    err = expect_error(tmp_path, scene)
+    assert err.field == "reconstruct.depth_model" and "models/dpt" in err.problem
+    (tmp_path / "models" / "dpt").mkdir(parents=True)
+    assert load_scene(tmp_path).reconstruct.depth_model == (tmp_path / "models" / "dpt").resolve()
