@@ -1,7 +1,7 @@
 """Quality of physmotion's results, printed as tables (recorded in benchmarks/RESULTS.md).
 
 One function per section; run all or one:
-    python benchmarks/quality.py [--section reconstruct] [--device cpu]
+    python benchmarks/quality.py [--section reconstruct|enhance] [--device cpu] [--results results/]
 
 reconstruct: for every example scene, the default pm-reconstruct settings:
   masked PSNR of the input-view render against the photograph (at the
@@ -10,6 +10,8 @@ reconstruct: for every example scene, the default pm-reconstruct settings:
   against the true depth, IoU of the side-view (azimuth 90 degrees) silhouette
   against the true one, and the hard-depth ablation as floater mass (summed
   opacity of Gaussians farther than 2 % of size_m from the true surface).
+
+enhance: the flow backend on the results of `make demo` (see enhancement_section).
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 
@@ -29,6 +32,10 @@ sys.path.insert(0, str(ROOT))
 
 import splat  # noqa: E402
 from schemas import load_scene  # noqa: E402
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, read_artifact  # noqa: E402
+from schemas.video import read_video  # noqa: E402
+from stages.enhance import flow  # noqa: E402
+from stages.enhance.compositing import blend_over_background, resize_to, unpremultiply  # noqa: E402
 from stages.reconstruct.metrics import iou, masked_psnr, median_relative_error  # noqa: E402
 from stages.reconstruct.optimize import Settings  # noqa: E402
 from stages.reconstruct.pipeline import optimize_scene, prepare  # noqa: E402
@@ -90,7 +97,60 @@ def reconstruction_section(device: str) -> str:
     return "\n".join(rows)
 
 
-SECTIONS = {"reconstruct": reconstruction_section}
+def _variance_of_laplacian(rgb: np.ndarray, mask: np.ndarray) -> float:
+    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float64)
+    return float(cv2.Laplacian(grey, cv2.CV_64F)[mask].var())
+
+
+def _psnr(a: np.ndarray, b: np.ndarray) -> float:
+    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)
+    return float(10 * np.log10(255.0 ** 2 / max(mse, 1e-12)))
+
+
+def enhancement_section(results: Path) -> str:
+    """Flow enhancement on each example scene's workflow results (run `make demo` first).
+
+    frame-0 PSNR against the photograph at the output size, whole frame: of the enhancer's
+    frame (recomputed from coarse.h5 and gaussians.h5, before encoding), of the decoded
+    video.mp4 (H.264 yuv420p halves the chroma resolution) and of the coarse render blended
+    over the inpainted background; sharpness: variance of the Laplacian of the enhanced frames
+    inside the object (rendered alpha > 0.5) over the first second, as a ratio to the
+    photograph's inside its mask (min / mean over frames); flicker: mean absolute change
+    between consecutive decoded frames of the pixels no frame's object ever covers.
+    """
+    rows = ["| scene | frames | frame-0 PSNR enhanced dB | decoded video dB | coarse dB "
+            "| sharpness ratio min / mean (1st s) | flicker (/255) |",
+            "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for scene_file in sorted((ROOT / "scenes").glob("*/scene.yaml")):
+        name, folder = scene_file.parent.name, results / scene_file.parent.name
+        if not (folder / "video.mp4").exists():
+            rows.append(f"| {name} | missing: run `make demo` first | | | | | |")
+            continue
+        scene = load_scene(scene_file)
+        gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
+        coarse = read_artifact(folder / "coarse.h5", CoarseArtifact)
+        enhanced = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold)
+        video, fps, _ = read_video(folder / "video.mp4")
+        h, w = coarse.height, coarse.width
+        photo = resize_to(gaussians.photo, w, h)
+        coarse_blend = blend_over_background(unpremultiply(coarse.rgb[0], coarse.alpha[0]), coarse.alpha[0],
+                                             resize_to(gaussians.background, w, h))
+        photo_mask = resize_to((gaussians.mask > 0).astype(np.uint8), w, h) > 0
+        photo_sharpness = _variance_of_laplacian(photo, photo_mask)
+        ratios = [_variance_of_laplacian(enhanced[t], coarse.alpha[t] > 0.5) / photo_sharpness
+                  for t in range(min(len(enhanced), int(round(fps)) + 1)) if (coarse.alpha[t] > 0.5).sum() > 16]
+        never_covered = (coarse.alpha < 1.0 / 255).all(axis=0)
+        flicker = np.abs(np.diff(video.astype(np.int16), axis=0))[:, never_covered].mean()
+        rows.append(f"| {name} | {len(video)} | {_psnr(enhanced[0], photo):.1f} | {_psnr(video[0], photo):.1f} "
+                    f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} "
+                    f"| {flicker:.2f} |")
+    return "\n".join(rows)
+
+
+SECTIONS = {
+    "reconstruct": lambda args: reconstruction_section(args.device),
+    "enhance": lambda args: enhancement_section(args.results),
+}
 
 
 def main() -> None:
@@ -98,12 +158,14 @@ def main() -> None:
     parser.add_argument("--section", choices=sorted(SECTIONS), action="append",
                         help="section(s) to run (default: all)")
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
+    parser.add_argument("--results", type=Path, default=ROOT / "results",
+                        help="the workflow's results folder, for the enhance section (default: results/)")
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", datefmt="%H:%M:%S")
     if args.device == "cpu":
         torch.set_num_threads(1)  # as pm-reconstruct: splat's threads already use the cores
     for name in args.section or sorted(SECTIONS):
-        print(f"## {name}\n\n{SECTIONS[name](args.device)}\n", flush=True)
+        print(f"## {name}\n\n{SECTIONS[name](args)}\n", flush=True)
 
 
 if __name__ == "__main__":
