@@ -7,11 +7,10 @@ INSTALLED := $(VENV)/.installed
 # The stage programs (pm-*) live in the venv; snakemake rules call them by name.
 export PATH := $(CURDIR)/$(BIN):$(PATH)
 
-.PHONY: demo test
+.PHONY: demo test debug-kernels
 
 $(INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet --upgrade pip
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -e ".[test,examples,diffusion]"
 	touch $@
@@ -21,3 +20,8 @@ demo: $(INSTALLED)
 
 test: $(INSTALLED)
 	$(BIN)/pytest
+
+# Every simulate kernel in Warp's debug mode (bounds-checked indexing); splat's
+# kernels are checked the same way by tests/splat.
+debug-kernels: $(INSTALLED)
+	$(BIN)/python benchmarks/debug_kernels.py
