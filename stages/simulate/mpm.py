@@ -321,9 +321,18 @@ class MPMSolver:
             for future in [self._pool.submit(launch) for launch in launches]:
                 future.result()
 
-    def _per_particle(self, kernel, args_of_start):
+    def _per_particle(self, *steps):
+        """Run (kernel, args_of_start) steps over the particles, each thread its own range through all steps.
+
+        Steps that read and write only their own particles need no barrier
+        between them, so a thread goes on to the next without waiting.
+        """
+        def run_range(start: int, count: int, part: int) -> None:
+            for kernel, args_of_start in steps:
+                wp.launch(kernel, dim=count, inputs=args_of_start(start, part), device=self.device)
+
         self._parallel([
-            (lambda s=s, c=c: wp.launch(kernel, dim=c, inputs=args_of_start(s, part), device=self.device))
+            (lambda s=s, c=c, part=part: run_range(s, c, part))
             for part, (s, c) in enumerate(self._ranges) if c > 0
         ])
 
@@ -347,9 +356,9 @@ class MPMSolver:
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
         g, dev = self.grid, self.device
-        self._per_particle(particle_to_grid, lambda s, part: [
+        self._per_particle((particle_to_grid, lambda s, part: [
             s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.grid_momentum_mass])
+            self._origin, g.dx, dt, self._shape, self.grid_momentum_mass]))
         lo, hi = self._active_nodes()
         self._parallel([
             (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
@@ -357,13 +366,17 @@ class MPMSolver:
                 self.ground.ground_node, self.ground.friction, self.grid_momentum_mass, self.grid_velocity]))
             for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
         ])
-        self._per_particle(grid_to_particle, lambda s, part: [
+        g2p = (grid_to_particle, lambda s, part: [
             s, self.grid_velocity, self._origin, g.dx, dt, self._shape, self.prescribed,
             self.prescribed_velocity, self.x, self.v, self.C, self.F])
-        if self.rigid is not None:
-            self.rigid.project(self, dt)
-        self._per_particle(update_stress, lambda s, part: [
+        stress = (update_stress, lambda s, part: [
             s, self.materials, self.object_id, self.volume, dt, self.F, self.history, self.volume_stress])
+        if self.rigid is None:
+            self._per_particle(g2p, stress)
+        else:  # the rigid projection gathers every rigid particle's G2P velocity first
+            self._per_particle(g2p)
+            self.rigid.project(self, dt)
+            self._per_particle(stress)
 
     def close(self) -> None:
         if self._pool is not None:
