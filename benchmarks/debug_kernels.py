@@ -76,7 +76,7 @@ def scenes() -> list[tuple[str, dict, list, list]]:
               ground={"enabled": True, "type": "friction", "friction": 0.3}), PRESETS, row),
         # thrown hard at the domain's corner: particles are clamped at the wall layer, stencils at the grid's edge
         ("a cube thrown into the domain's corner, no ground",
-         dict(duration_s=0.3, fps=10, grid=16, gravity=[0, 0, 0], ground={"enabled": False},
+         dict(duration_s=0.2, fps=10, grid=16, gravity=[0, 0, 0], ground={"enabled": False},
               conditions=[{"type": "impulse", "velocity": [-20.0, -20.0, -20.0]}]),
          [M.Jelly()], [((0, 0, 0), (0.05, 0.05, 0.05))]),
     ]
