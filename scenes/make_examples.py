@@ -43,6 +43,8 @@ def logo(size: int = 256) -> None:
     r, c = np.mgrid[0:size, 0:size] + 0.5
     distance = np.hypot(c - centre[0], r - centre[1])
     alpha = np.clip(radius - distance + 0.5, 0, 1)  # one-pixel anti-aliased edge
+    # Over white where transparent, so that colour and alpha agree (the page is off-white).
+    rgb = np.round(rgb * alpha[..., None] + 255 * (1 - alpha[..., None])).astype(np.uint8)
     rgba = np.dstack([rgb, np.round(alpha * 255).astype(np.uint8)])
     cv2.imwrite(str(HERE / "logo" / "logo.png"), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
 
