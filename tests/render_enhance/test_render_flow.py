@@ -78,7 +78,9 @@ def test_source_uv_maps_rest_pixels_onto_themselves(shifted_run):
     _, _, coarse, _ = shifted_run
     _, disc = textured_photo()
     inner = disc & np.roll(disc, 1, 0) & np.roll(disc, -1, 0) & np.roll(disc, 1, 1) & np.roll(disc, -1, 1)
-    for region, tolerance in ((inner, 0.05), (disc, 0.15)):  # px; the silhouette is fitted by alpha weight
+    # px; projected centres would be 0.25-0.45 px off; the silhouette, where fewer visible
+    # Gaussians overlap, is fitted by alpha weight
+    for region, tolerance in ((inner, 0.1), (disc, 0.3)):
         rows, cols = np.nonzero(region)
         error = np.abs(coarse.source_uv[0][rows, cols] - np.stack([cols + 0.5, rows + 0.5], 1)).max()
         assert error < tolerance
@@ -107,3 +109,20 @@ def test_background_where_the_object_left(shifted_run):
     uncovered = disc & ~np.roll(disc, shifts[-1] + 2, axis=1) & (coarse.alpha[-1] < 1e-3)
     assert uncovered.sum() > 20
     assert np.abs(frames[-1][uncovered].astype(int) - 128).max() <= 1
+
+
+def test_scrambled_surface_falls_back_to_the_render():
+    """Gaussians shuffled among each other's places: every pixel now blends sources from all over the
+    photograph, so the lookup is incoherent and the enhancement must show the render, not a mix."""
+    gaussians = disc_gaussians()
+    front = len(gaussians.means) // 2
+    order = np.random.default_rng(0).permutation(front)
+    scrambled = translated(gaussians, [0, 0])
+    scrambled.positions[1, :front] = gaussians.means[order]
+    coarse = render_video(gaussians, scrambled, width=W, device="cpu")
+    _, disc = textured_photo()
+    assert coarse.source_confidence[0][disc].mean() > 0.95
+    assert coarse.source_confidence[1][disc].mean() < 0.1
+    frames = enhance_frames(coarse, gaussians, threshold=0.5)
+    rendered = coarse.rgb[1][disc].astype(float) / coarse.alpha[1][disc, None]
+    assert np.abs(frames[1][disc] - rendered).mean() < 3.0
