@@ -19,6 +19,8 @@ from .compositing import blend_over_background, resize_to, unpremultiply
 
 log = logging.getLogger("physmotion.enhance.flow")
 
+SOURCE_SMOOTHING_PX = 1.0
+"""Standard deviation (output pixels) of the blur that takes the jitter out of source_uv."""
 EDGE_SOFTNESS_PX = 0.5
 """Blur (output pixels) of the photograph's eroded object mask: photo pixels on the silhouette mix in
 the old background, so their trust fades out over about this distance instead of leaving a halo."""
@@ -44,6 +46,23 @@ def sample_at(image: np.ndarray, uv: np.ndarray, interpolation: int = cv2.INTER_
     return cv2.remap(image, maps[..., 0], maps[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
+def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
+    """The source map with its per-pixel jitter removed, NaN where it was NaN.
+
+    A normalised Gaussian blur (over the pixels that have a source only) leaves any affine
+    map unchanged, so the surface does not move; what it removes is the fit's residual of a
+    few tenths of a pixel, which, sampled over a textured photograph, reads as added noise
+    (measured on the coffee scene: texture sharpness 1.29x the photograph's at rest, 1.01x smoothed).
+
+    Args:
+        uv: (h, w, 2) image points, NaN where there is no surface.
+    """
+    valid = np.isfinite(uv[..., 0]).astype(np.float32)
+    weighted = cv2.GaussianBlur(np.nan_to_num(uv).astype(np.float32) * valid[..., None], (0, 0), sigma_px)
+    weight = cv2.GaussianBlur(valid, (0, 0), sigma_px)
+    return np.where(valid[..., None] > 0, weighted / np.maximum(weight, 1e-6)[..., None], np.nan)
+
+
 def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:
     """Smooth step from 0 to 1 around ``threshold`` (width 0.2), so the switch between photo and render never pops."""
     x = np.clip((np.nan_to_num(confidence) - threshold) / 0.2 + 0.5, 0.0, 1.0)
@@ -67,7 +86,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     coverage = object_coverage(gaussians.mask, w, h)
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
-        uv = coarse.source_uv[t] * scale
+        uv = smooth_source(coarse.source_uv[t] * scale)
         # Lanczos: a bilinear lookup at sub-pixel offsets would soften the photograph's finest detail
         # (measured: texture sharpness 0.5 of the photograph's on the ball scene, 0.9 with Lanczos).
         from_photo = np.clip(sample_at(photo, uv, cv2.INTER_LANCZOS4), 0, 255)
