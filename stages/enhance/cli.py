@@ -43,7 +43,7 @@ def enhance(args: argparse.Namespace) -> None:
     coarse = read_artifact(args.coarse, CoarseArtifact)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     backend = scene.enhance.backend
-    log.info("backend %s, %d frames of %dx%d", backend, *coarse.alpha.shape[:1], coarse.width, coarse.height)
+    log.info("backend %s, %d frames of %dx%d", backend, len(coarse.alpha), coarse.width, coarse.height)
     if backend == "flow":
         frames = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold)
     else:
