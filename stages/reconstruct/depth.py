@@ -16,7 +16,7 @@ import numpy as np
 from scipy import ndimage
 
 from .geometry import pixel_rays
-from .local_model import require_model_folder
+from .local_model import load_local_model
 
 
 EDGE_OFFSET_PX = 0.3
@@ -150,11 +150,10 @@ class DptDepth:
         import torch
         from transformers import AutoImageProcessor, AutoModelForDepthEstimation
 
-        model_dir = Path(model_dir)
-        require_model_folder(model_dir, "depth-estimation", "Intel/dpt-hybrid-midas", "use the default inflation prior")
         self.torch, self.device = torch, device
-        self.processor = AutoImageProcessor.from_pretrained(model_dir, local_files_only=True)
-        self.model = AutoModelForDepthEstimation.from_pretrained(model_dir, local_files_only=True).to(device).eval()
+        self.processor, self.model = load_local_model(
+            AutoImageProcessor, AutoModelForDepthEstimation, Path(model_dir), device,
+            "depth-estimation", "Intel/dpt-hybrid-midas", "use the default inflation prior")
 
     def inverse_depth(self, photo: np.ndarray) -> np.ndarray:
         """(H,W) float64 relative inverse depth of the RGB u8 photo (larger = nearer), resized to the photo."""

@@ -1,4 +1,4 @@
-"""Checks that a transformers model folder is complete before loading it (weights never come from a hub)."""
+"""Loading a transformers model from a local folder, checked complete first (weights never come from a hub)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -20,3 +20,12 @@ def require_model_folder(model_dir: Path, kind: str, example: str, otherwise: st
         raise InputError(model_dir / "config.json", None, f"{kind} model file is missing", fix)
     if not any((model_dir / name).is_file() for name in PROCESSOR_FILES):
         raise InputError(model_dir / PROCESSOR_FILES[0], None, f"{kind} processor file is missing", fix)
+
+
+def load_local_model(processor_class, model_class, model_dir: Path, device: str, kind: str, example: str,
+                     otherwise: str):
+    """(processor, model in eval mode on ``device``) from a checked local folder; never from a hub."""
+    require_model_folder(model_dir, kind, example, otherwise)
+    processor = processor_class.from_pretrained(model_dir, local_files_only=True)
+    model = model_class.from_pretrained(model_dir, local_files_only=True).to(device).eval()
+    return processor, model

@@ -16,7 +16,7 @@ from scipy import ndimage
 
 from schemas import InputError
 
-from .local_model import require_model_folder
+from .local_model import load_local_model
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -133,11 +133,9 @@ class SamSegmenter:
         import torch
         from transformers import SamModel, SamProcessor
 
-        model_dir = Path(model_dir)
-        require_model_folder(model_dir, "SAM", "facebook/sam-vit-base", "segment with a mask or a box")
         self.torch, self.device = torch, device
-        self.processor = SamProcessor.from_pretrained(model_dir, local_files_only=True)
-        self.model = SamModel.from_pretrained(model_dir, local_files_only=True).to(device).eval()
+        self.processor, self.model = load_local_model(SamProcessor, SamModel, Path(model_dir), device,
+                                                      "SAM", "facebook/sam-vit-base", "segment with a mask or a box")
 
     def segment(self, photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
         """Boolean mask (H,W) of the object in ``box`` [x0,y0,x1,y1]: SAM's highest-scoring mask."""
