@@ -10,13 +10,13 @@ import hashlib
 import json
 import re
 from pathlib import Path
-from typing import Annotated, Any, List, Literal, Optional, Tuple, Union
+from typing import Annotated, Any, List, Literal, Optional, Tuple, Union, get_args
 
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator, PrivateAttr
 
 from .diffusion import DiffusionSettings
-from .materials import Jelly, Material
+from .materials import PRESETS, Jelly, Material
 from .program import InputError
 
 Vec3 = Tuple[float, float, float]
@@ -223,19 +223,23 @@ _Yaml12Loader.add_implicit_resolver(
 )  # appended after PyYAML's own int and float resolvers, so `2` stays an int
 
 
+CONDITION_TYPES = tuple(get_args(c.model_fields["type"].annotation)[0] for c in (Impulse, Velocity, Force, Torque, Fixed))
+
+
 def _loc_to_field(loc: Tuple[Any, ...]) -> str:
-    """('objects', 0, 'material', 'jelly', 'density') -> 'objects[0].material.density'."""
-    out = ""
+    """('objects', 0, 'material', 'jelly', 'density') -> 'objects[0].material.density'.
+
+    pydantic puts the tag of a discriminated union into the path right after the field that
+    holds it (a material, or an item of conditions); only there is it dropped, since a tag may
+    also name a field (an impulse has a 'velocity')."""
+    out, tags, previous = "", (), None
     for part in loc:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        elif part in ("jelly", "metal", "sand", "plasticine", "foam", "snow", "rigid", "fracture",
-                      "impulse", "velocity", "force", "torque", "fixed") and out.endswith(("material", "]")):
-            continue  # discriminated-union tags pydantic puts into the path
-        elif isinstance(part, str) and (part.startswith(("literal[", "BoxRegion", "SphereRegion"))):
+        if part in tags:
+            tags = ()
             continue
-        else:
-            out += ("." if out else "") + str(part)
+        out += f"[{part}]" if isinstance(part, int) else ("." if out else "") + str(part)
+        tags = PRESETS if part == "material" else CONDITION_TYPES if previous == "conditions" else ()
+        previous = part
     return out
 
 

@@ -153,3 +153,9 @@ def test_model_folders_resolve_or_are_refused(tmp_path):
     assert err.field == "reconstruct.depth_model" and "models/dpt" in err.problem
     (tmp_path / "models" / "dpt").mkdir(parents=True)
     assert load_scene(tmp_path).reconstruct.depth_model == (tmp_path / "models" / "dpt").resolve()
+
+
+def test_error_inside_a_condition_names_its_field(tmp_path):
+    scene = tiny_scene_dict()
+    scene["physics"]["conditions"][0]["velocity"] = [1.0, 2.0]  # an impulse's 'velocity' is also a condition type
+    assert expect_error(tmp_path, scene).field.startswith("physics.conditions[0].velocity")
