@@ -1,0 +1,42 @@
+#!/bin/sh
+# Builds the stage images physmotion/<stage>:<version> from stages/*/Dockerfile, on a machine whose
+# Docker engine cannot pull from a registry (no python:3.11-slim) and may not reach PyTorch's index.
+#
+#   sh containers/build_images.sh                          # reconstruct, simulate and enhance
+#   TORCH_WHEEL=/opt/wheels/torch-2.13.0+cpu-cp311-cp311-manylinux_2_28_x86_64.whl \
+#       sh containers/build_images.sh simulate             # torch from a local wheel
+#
+# BASE: the base image (default physmotion/base:bookworm, made by make_base_image.sh when missing).
+# TORCH_WHEEL: a torch 2.13.0 wheel for CPython 3.11 on Linux. The host's pip fetches its
+# dependencies, and a PEP 503 index of them all is served on loopback for the build's TORCH_INDEX;
+# without it the Dockerfiles' default index is used. Builds use the host's network (--network host).
+set -eu
+cd "$(dirname "$0")/.."
+VERSION=$(sed -n 's/^version = "\(.*\)"$/\1/p' pyproject.toml)
+BASE=${BASE:-physmotion/base:bookworm}
+PYTHON=${PYTHON:-python3}
+docker image inspect "$BASE" >/dev/null 2>&1 || sh containers/make_base_image.sh "$BASE"
+set -- ${*:-reconstruct simulate enhance}
+ARGS="--network host --build-arg BASE=$BASE"
+
+if [ -n "${TORCH_WHEEL:-}" ]; then
+    INDEX=$(mktemp -d /tmp/physmotion-index.XXXXXX)
+    SERVER=
+    trap '[ -z "$SERVER" ] || kill "$SERVER"; rm -rf "$INDEX"' EXIT
+    "$PYTHON" -m pip download --quiet --dest "$INDEX/wheels" "$TORCH_WHEEL"
+    for whl in "$INDEX"/wheels/*; do        # simple/<normalised project name>/<file>
+        name=$(basename "$whl" | cut -d- -f1 | tr 'A-Z_.' 'a-z--')
+        mkdir -p "$INDEX/simple/$name" && mv "$whl" "$INDEX/simple/$name/"
+    done
+    PORT=$("$PYTHON" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+    "$PYTHON" -m http.server --bind 127.0.0.1 --directory "$INDEX" "$PORT" >/dev/null 2>&1 &
+    SERVER=$!
+    sleep 1
+    ARGS="$ARGS --build-arg TORCH_INDEX=http://127.0.0.1:$PORT/simple"
+fi
+
+for stage in "$@"; do
+    start=$(date +%s)
+    docker build $ARGS -f "stages/$stage/Dockerfile" -t "physmotion/$stage:$VERSION" .
+    echo "physmotion/$stage:$VERSION built in $(( $(date +%s) - start )) s"
+done
