@@ -175,6 +175,10 @@ class EnhanceConfig(_Strict):
     backend: Literal["flow", "diffusion"] = Field("flow", description="flow: photo pixels moved by the simulation")
     confidence_threshold: float = Field(0.5, ge=0, le=1,
                                         description="flow: trust the photograph where source_confidence is above this")
+    hidden_surfaces: Literal["photo", "render"] = Field(
+        "photo", description="flow: what surfaces the photograph never saw (the back, an opened interior) show. "
+        "photo: the photograph read through the object at source_uv, the texture the reconstruction gave them, "
+        "wherever it maps smoothly (source_coherence); render: the coarse render")
     diffusion: DiffusionSettings = DiffusionSettings()
 
 

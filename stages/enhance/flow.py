@@ -1,9 +1,15 @@
 """The flow backend: the photograph's own pixels, carried along with the simulated motion.
 
 Every coarse pixel knows (``source_uv``) where its surface was in the
-photograph at rest and (``source_confidence``) how visible that surface was
-there. Where the surface was seen we take the photograph's colour from that
-point; where it was hidden (the back, an opened fracture) we keep the render.
+photograph at rest, (``source_coherence``) whether the photograph maps smoothly
+onto the frame there and (``source_confidence``) how visible that surface was
+in the photograph. Where the surface was seen we take the photograph's colour
+from that point. A surface the photograph never saw (the back, an opened
+fracture) has as its source the point of the photograph in front of it, the
+colour the reconstruction gave it: with ``hidden_surfaces="photo"`` we read the
+photograph there too, wherever the map is smooth, which keeps the photograph's
+detail where the render would blur it; with ``"render"`` we keep the render.
+Where the map is not smooth (tumbling, flowing material) the render is used.
 The result is blended over the inpainted background with the rendered alpha.
 """
 from __future__ import annotations
@@ -69,13 +75,16 @@ def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:
     return x * x * (3 - 2 * x)
 
 
-def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float) -> np.ndarray:
+def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float,
+                   hidden_surfaces: str = "photo") -> np.ndarray:
     """The flow-enhanced video.
 
     Args:
         coarse: the render, T frames of h x w.
         gaussians: the reconstruction: photograph, object mask and inpainted background at full resolution.
-        threshold: source_confidence above which the photograph is trusted.
+        threshold: source_confidence (source_coherence, for hidden surfaces read as "photo") above which
+            the photograph is trusted.
+        hidden_surfaces: "photo" or "render", see the module docstring.
     Returns:
         (T, h, w, 3) uint8 RGB frames.
     """
@@ -90,7 +99,10 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         # Lanczos: a bilinear lookup at sub-pixel offsets would soften the photograph's finest detail
         # (measured: texture sharpness 0.5 of the photograph's on the ball scene, 0.9 with Lanczos).
         from_photo = np.clip(sample_at(photo, uv, cv2.INTER_LANCZOS4), 0, 255)
-        weight = (trust(coarse.source_confidence[t], threshold) * sample_at(coverage, uv))[..., None]
+        trusted = trust(coarse.source_confidence[t], threshold)
+        if hidden_surfaces == "photo":
+            trusted = np.maximum(trusted, trust(coarse.source_coherence[t], threshold))
+        weight = (trusted * sample_at(coverage, uv))[..., None]
         rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
         colour = weight * from_photo + (1.0 - weight) * rendered
         frames[t] = blend_over_background(colour, coarse.alpha[t], background)

@@ -73,6 +73,7 @@ def write_inputs(folder: Path, enhance: dict) -> dict:
     rgb = (alpha[..., None] * np.array([220, 60, 40])).astype(np.uint8)
     coarse = CoarseArtifact(rgb=rgb, alpha=alpha, depth=depth,
                             source_uv=np.zeros((FRAMES, SIZE, SIZE, 2), np.float32),
+                            source_coherence=np.zeros((FRAMES, SIZE, SIZE), np.float32),
                             source_confidence=np.zeros((FRAMES, SIZE, SIZE), np.float32),
                             K=np.eye(3), width=SIZE, height=SIZE, fps=8.0)
     paths = {"scene": folder / "scene.yaml", "gaussians": folder / "gaussians.h5", "coarse": folder / "coarse.h5"}

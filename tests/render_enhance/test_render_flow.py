@@ -1,5 +1,6 @@
 """pm-render and the flow backend on a scene whose answer is known: a textured disc of Gaussians
 (one per pixel, facing the camera) with a hidden layer behind it, translated by whole pixels."""
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -24,18 +25,20 @@ def textured_photo() -> tuple[np.ndarray, np.ndarray]:
 
 
 def disc_gaussians() -> GaussiansArtifact:
-    """A front layer of Gaussians, one per disc pixel, on the plane z = DEPTH; a green layer 5 cm behind it."""
+    """A front layer of Gaussians, one per disc pixel, on the plane z = DEPTH; a green layer 5 % farther
+    on the same rays, so each of its Gaussians projects onto the same pixel centre."""
     photo, disc = textured_photo()
     K = np.array([[FOCAL, 0, W / 2], [0, FOCAL, H / 2], [0, 0, 1]])
     rows, cols = np.nonzero(disc)
     front = np.stack([(cols + 0.5 - W / 2) * DEPTH / FOCAL, (rows + 0.5 - H / 2) * DEPTH / FOCAL,
                       np.full(len(rows), DEPTH)], 1)
-    back = front + [0, 0, 0.05]
+    back = front * 1.05
     n = len(rows)
     pixel = DEPTH / FOCAL
+    scales = np.tile([0.35 * pixel, 0.35 * pixel, 0.05 * pixel], (n, 1))
     return GaussiansArtifact(
         K=K, world_to_camera=np.eye(4), width=W, height=H, means=np.concatenate([front, back]),
-        scales=np.tile([0.35 * pixel, 0.35 * pixel, 0.05 * pixel], (2 * n, 1)),
+        scales=np.concatenate([scales, scales * 1.05]),
         rotations=np.tile([1.0, 0, 0, 0], (2 * n, 1)), opacities=np.ones(2 * n),
         colors=np.concatenate([photo[rows, cols] / 255.0, np.tile([0.0, 1.0, 0.0], (n, 1))]),
         object_id=np.zeros(2 * n), photo=photo, mask=disc.astype(np.uint8), background=np.full((H, W, 3), 128),
@@ -126,3 +129,25 @@ def test_scrambled_surface_falls_back_to_the_render():
     frames = enhance_frames(coarse, gaussians, threshold=0.5)
     rendered = coarse.rgb[1][disc].astype(float) / coarse.alpha[1][disc, None]
     assert np.abs(frames[1][disc] - rendered).mean() < 3.0
+
+
+def test_revealed_hidden_layer_reads_the_photograph_through_the_object():
+    """The front layer leaves the view at frame 1 and reveals the green layer the photograph never
+    saw. Nothing else moved, so each pixel's source is its own place in the photograph: the
+    "photo" setting must show the photograph there, "render" the green layer."""
+    gaussians = disc_gaussians()
+    front = len(gaussians.means) // 2
+    revealed = translated(gaussians, [0, 0])
+    revealed.positions[1, :front] += [10.0, 0.0, 0.0]
+    coarse = render_video(gaussians, revealed, width=W, device="cpu")
+    photo, _ = textured_photo()
+    inner = cv2.erode((coarse.alpha[1] > 0.5).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert inner.sum() > 200
+    assert coarse.source_confidence[1][inner].max() < 0.1  # hidden at rest
+    assert coarse.source_coherence[1][inner].min() > 0.9  # but it maps smoothly
+    rows, cols = np.nonzero(inner)
+    assert np.abs(coarse.source_uv[1][inner] - np.stack([cols + 0.5, rows + 0.5], 1)).max() < 0.1  # px
+    through = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo")[1][inner].astype(float)
+    rendered = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="render")[1][inner].astype(float)
+    assert np.abs(through - photo[inner]).mean() < 2.0
+    assert np.abs(rendered - [0, 255, 0]).mean() < 3.0
