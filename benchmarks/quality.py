@@ -109,16 +109,24 @@ def _moved_photograph(coarse: CoarseArtifact, gaussians: GaussiansArtifact, t: i
     """Frame t with the object read from the photograph at source_uv everywhere, no render fallback."""
     h, w = coarse.height, coarse.width
     uv = flow.smooth_source(coarse.source_uv[t] * w / gaussians.width)
-    photo = resize_to(gaussians.photo, w, h).astype(np.float32)
-    colour = np.clip(flow.sample_at(photo, uv, cv2.INTER_LANCZOS4), 0, 255)
+    colour = flow.photograph_at(flow.band_limited_upsample(resize_to(gaussians.photo, w, h)), uv)
     return blend_over_background(colour, coarse.alpha[t], resize_to(gaussians.background, w, h))
 
 
+def _area_scale(coarse: CoarseArtifact, gaussians: GaussiansArtifact, t: int) -> float:
+    """Median over the object of frame t of det(d source_uv / d pixel), in output pixels."""
+    uv = flow.smooth_source(coarse.source_uv[t] * coarse.width / gaussians.width)
+    du, dv = np.gradient(uv, axis=1), np.gradient(uv, axis=0)
+    det = du[..., 0] * dv[..., 1] - du[..., 1] * dv[..., 0]
+    inside = (cv2.erode((coarse.alpha[t] > 0.5).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0) & np.isfinite(det)
+    return float(np.median(det[inside]))
+
+
 def _shifted(image: np.ndarray, offset_px: float) -> np.ndarray:
-    """The image moved by ``offset_px`` along x and y with the flow backend's Lanczos lookup."""
-    shift = np.float32([[1, 0, offset_px], [0, 1, offset_px]])
-    return cv2.warpAffine(image, shift, (image.shape[1], image.shape[0]), flags=cv2.INTER_LANCZOS4,
-                          borderMode=cv2.BORDER_REFLECT)
+    """The image moved by ``offset_px`` along x and y by the flow backend's lookup."""
+    rows, cols = np.indices(image.shape[:2], dtype=np.float32)
+    uv = np.stack([cols, rows], -1) + 0.5 - offset_px
+    return (flow.photograph_at(flow.band_limited_upsample(image), uv) + 0.5).astype(np.uint8)
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -139,18 +147,20 @@ def enhancement_section(results: Path) -> str:
     with no render fallback: the Laplacian's variance grows as 1/s^4 when a surface's image
     shrinks by s (foreshortened, compressed), so a moving object's own detail is not the
     photograph's; and for scale, the ratio of the photograph itself shifted by a quarter and by half
-    a pixel along x and y by the backend's Lanczos lookup (any sub-pixel resampling softens the
-    finest detail, which this measure weighs most); flicker: mean absolute change between
+    a pixel along x and y by the backend's lookup (sub-pixel resampling can soften the finest
+    detail, which this measure weighs most); the range over the first second of the source map's
+    median area scale inside the object (photograph pixels per frame pixel: above 1 the surface's
+    image shrank, which raises the measure by about its square); flicker: mean absolute change between
     consecutive decoded frames of the pixels no frame's object ever covers.
     """
     rows = ["| scene | frames | frame-0 PSNR enhanced dB | decoded video dB | coarse dB "
-            "| sharpness ratio min / mean (1st s) | moved photograph's | photograph shifted 1/4, 1/2 px "
-            "| flicker (/255) |",
-            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+            "| sharpness ratio min / mean / max (1st s) | moved photograph's | photograph shifted 1/4, 1/2 px "
+            "| area scale | flicker (/255) |",
+            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for scene_file in sorted((ROOT / "scenes").glob("*/scene.yaml")):
         name, folder = scene_file.parent.name, results / scene_file.parent.name
         if not (folder / "video.mp4").exists():
-            rows.append(f"| {name} | missing: run `make demo` first | | | | | | | |")
+            rows.append(f"| {name} | missing: run `make demo` first | | | | | | | | |")
             continue
         scene = load_scene(scene_file)
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
@@ -168,13 +178,14 @@ def enhancement_section(results: Path) -> str:
         ratios = [_variance_of_laplacian(enhanced[t], coarse.alpha[t] > 0.5) / photo_sharpness for t in first_second]
         moved = [_variance_of_laplacian(_moved_photograph(coarse, gaussians, t), coarse.alpha[t] > 0.5)
                  / photo_sharpness for t in first_second]
+        area = [_area_scale(coarse, gaussians, t) for t in first_second]
         never_covered = (coarse.alpha < 1.0 / 255).all(axis=0)
         flicker = np.abs(np.diff(video.astype(np.int16), axis=0))[:, never_covered].mean()
         rows.append(f"| {name} | {len(video)} | {_psnr(enhanced[0], photo):.1f} | {_psnr(video[0], photo):.1f} "
-                    f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} "
-                    f"| {min(moved):.2f} / {np.mean(moved):.2f} | "
+                    f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} / {max(ratios):.2f} "
+                    f"| {min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f} | "
                     + ", ".join(f"{_variance_of_laplacian(_shifted(photo, d), photo_mask) / photo_sharpness:.2f}"
-                                for d in (0.25, 0.5)) + f" | {flicker:.2f} |")
+                                for d in (0.25, 0.5)) + f" | {min(area):.2f}-{max(area):.2f} | {flicker:.2f} |")
     return "\n".join(rows)
 
 
