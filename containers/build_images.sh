@@ -6,7 +6,8 @@
 #   TORCH_WHEEL=/opt/wheels/torch-2.13.0+cpu-cp311-cp311-manylinux_2_28_x86_64.whl \
 #       sh containers/build_images.sh simulate             # torch from a local wheel
 #
-# BASE: the base image (default physmotion/base:bookworm, made by make_base_image.sh when missing).
+# BASE: the base image (default physmotion/base:bookworm, made by make_base_image.sh when missing;
+# BASE=python:3.11-slim where the engine can pull, as the Dockerfiles' own default).
 # TORCH_WHEEL: a torch 2.13.0 wheel for CPython 3.11 on Linux. The host's pip fetches its
 # dependencies, and a PEP 503 index of them all is served on loopback for the build's TORCH_INDEX;
 # without it the Dockerfiles' default index is used. Builds use the host's network (--network host).
@@ -15,7 +16,9 @@ cd "$(dirname "$0")/.."
 VERSION=$(sed -n 's/^version = "\(.*\)"$/\1/p' pyproject.toml)
 BASE=${BASE:-physmotion/base:bookworm}
 PYTHON=${PYTHON:-python3}
-docker image inspect "$BASE" >/dev/null 2>&1 || sh containers/make_base_image.sh "$BASE"
+if ! docker image inspect "$BASE" >/dev/null 2>&1; then
+    case $BASE in physmotion/base:*) sh containers/make_base_image.sh "$BASE" ;; esac   # others are pulled
+fi
 set -- ${*:-reconstruct simulate enhance}
 ARGS="--network host --build-arg BASE=$BASE"
 
