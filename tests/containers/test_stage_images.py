@@ -29,13 +29,12 @@ CHAIN = {
     "enhance": [["pm-enhance", "--scene", S, "--coarse", f"{R}/coarse.h5", "--gaussians", f"{R}/gaussians.h5",
                  "--out", f"{R}/video.mp4"]],
 }
-# What each image must and must not hold.
-PROGRAMS = {"reconstruct": {"pm-reconstruct"}, "simulate": {"pm-simulate", "pm-render"},
-            "enhance": {"pm-enhance", "pm-lora", "pm-invert"}}
-ALL_PROGRAMS = set().union(*PROGRAMS.values())
-PROBE = ("import importlib.util, json, shutil; print(json.dumps({"
-         "'programs': sorted(p for p in %r if shutil.which(p)), "
-         "'diffusers': importlib.util.find_spec('diffusers') is not None}))" % sorted(ALL_PROGRAMS))
+# Each image's programs: every image has the scripts of all six (one pyproject), but only these run.
+PROGRAMS = {"reconstruct": ["pm-reconstruct"], "simulate": ["pm-simulate", "pm-render"],
+            "enhance": ["pm-enhance", "pm-lora", "pm-invert"]}
+# Which stage packages and whether diffusers the image holds, as one JSON line.
+PROBE = ("import importlib.util as u, json; print(json.dumps({'stages': [s for s in %r if u.find_spec('stages.' + s)], "
+         "'diffusers': u.find_spec('diffusers') is not None}))" % sorted(PROGRAMS))
 
 
 @pytest.fixture(scope="module")
@@ -56,11 +55,12 @@ def test_image_holds_its_stage_only(images, stage, tmp_path):
     image = f"physmotion/{stage}:{TAG}"
     inspect = docker("image", "inspect", "--format", "{{json .Config.Entrypoint}}", image)
     assert json.loads(inspect.stdout) == [f"pm-{stage}"], inspect.stdout + inspect.stderr
-    proc = run_in_image(image, tmp_path, [[f"pm-{stage}", "--help"], ["python", "-c", PROBE]])
+    helps = [[program, "--help"] for program in PROGRAMS[stage]]
+    proc = run_in_image(image, tmp_path, helps + [["python", "-c", PROBE]])
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert f"usage: pm-{stage}" in proc.stdout
+    assert all(f"usage: {program}" in proc.stdout for program in PROGRAMS[stage]), proc.stdout[-2000:]
     held = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert set(held["programs"]) == PROGRAMS[stage]
+    assert held["stages"] == [stage], "an image holds its own stage's code only"
     assert held["diffusers"] == (stage == "enhance"), "only the enhance image may hold diffusers"
 
 
