@@ -11,6 +11,7 @@
 # TORCH_WHEEL: a torch 2.13.0 wheel for CPython 3.11 on Linux. The host's pip fetches its
 # dependencies, and a PEP 503 index of them all is served on loopback for the build's TORCH_INDEX;
 # without it the Dockerfiles' default index is used. Builds use the host's network (--network host).
+# TORCH_INDEX_PORT: the loopback port of that index (default 8765).
 set -eu
 cd "$(dirname "$0")/.."
 VERSION=$(sed -n 's/^version = "\(.*\)"$/\1/p' pyproject.toml)
@@ -31,10 +32,12 @@ if [ -n "${TORCH_WHEEL:-}" ]; then
         name=$(basename "$whl" | cut -d- -f1 | tr 'A-Z_.' 'a-z--')
         mkdir -p "$INDEX/simple/$name" && mv "$whl" "$INDEX/simple/$name/"
     done
-    PORT=$("$PYTHON" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+    # A fixed port: the index URL is part of the cache key of the Dockerfiles' pip layer.
+    PORT=${TORCH_INDEX_PORT:-8765}
     "$PYTHON" -m http.server --bind 127.0.0.1 --directory "$INDEX" "$PORT" >/dev/null 2>&1 &
     SERVER=$!
     sleep 1
+    kill -0 "$SERVER" 2>/dev/null || { SERVER=; echo "port $PORT is taken: set TORCH_INDEX_PORT" >&2; exit 1; }
     ARGS="$ARGS --build-arg TORCH_INDEX=http://127.0.0.1:$PORT/simple"
 fi
 
