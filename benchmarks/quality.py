@@ -97,36 +97,31 @@ def reconstruction_section(device: str) -> str:
     return "\n".join(rows)
 
 
+def _inside(mask: np.ndarray) -> np.ndarray:
+    """The object's pixels without the silhouette's own edge (3 px), whose contrast against the
+    background would outweigh the texture."""
+    return cv2.erode(mask.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+
+
 def _variance_of_laplacian(rgb: np.ndarray, mask: np.ndarray) -> float:
-    """Texture sharpness inside an object: the silhouette's own edge (3 px) is left out, since
-    its contrast against the background would outweigh the texture."""
+    """Texture sharpness inside an object (see _inside)."""
     grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float64)
-    inside = cv2.erode(mask.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
-    return float(cv2.Laplacian(grey, cv2.CV_64F)[inside].var())
+    return float(cv2.Laplacian(grey, cv2.CV_64F)[_inside(mask)].var())
 
 
-def _moved_photograph(coarse: CoarseArtifact, gaussians: GaussiansArtifact, t: int) -> np.ndarray:
-    """Frame t with the object read from the photograph at source_uv everywhere, no render fallback."""
-    h, w = coarse.height, coarse.width
-    uv = flow.smooth_source(coarse.source_uv[t] * w / gaussians.width)
-    colour = flow.photograph_at(flow.band_limited_upsample(resize_to(gaussians.photo, w, h)), uv)
-    return blend_over_background(colour, coarse.alpha[t], resize_to(gaussians.background, w, h))
-
-
-def _area_scale(coarse: CoarseArtifact, gaussians: GaussiansArtifact, t: int) -> float:
-    """Median over the object of frame t of det(d source_uv / d pixel), in output pixels."""
-    uv = flow.smooth_source(coarse.source_uv[t] * coarse.width / gaussians.width)
+def _area_scale(uv: np.ndarray, mask: np.ndarray) -> float:
+    """Median inside the object (see _inside) of det(d uv / d pixel) of a source map uv (h, w, 2)."""
     du, dv = np.gradient(uv, axis=1), np.gradient(uv, axis=0)
     det = du[..., 0] * dv[..., 1] - du[..., 1] * dv[..., 0]
-    inside = (cv2.erode((coarse.alpha[t] > 0.5).astype(np.uint8), np.ones((7, 7), np.uint8)) > 0) & np.isfinite(det)
-    return float(np.median(det[inside]))
+    return float(np.median(det[_inside(mask) & np.isfinite(det)]))
 
 
-def _shifted(image: np.ndarray, offset_px: float) -> np.ndarray:
-    """The image moved by ``offset_px`` along x and y by the flow backend's lookup."""
-    rows, cols = np.indices(image.shape[:2], dtype=np.float32)
+def _shifted(fine_photo: np.ndarray, offset_px: float) -> np.ndarray:
+    """The photograph (its band-limited copy) moved by ``offset_px`` along x and y by the flow backend's lookup."""
+    rows, cols = np.indices((fine_photo.shape[0] // flow.OVERSAMPLING, fine_photo.shape[1] // flow.OVERSAMPLING),
+                            dtype=np.float32)
     uv = np.stack([cols, rows], -1) + 0.5 - offset_px
-    return (flow.photograph_at(flow.band_limited_upsample(image), uv) + 0.5).astype(np.uint8)
+    return (flow.photograph_at(fine_photo, uv) + 0.5).astype(np.uint8)
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -170,21 +165,26 @@ def enhancement_section(results: Path) -> str:
         video, fps, _ = read_video(folder / "video.mp4")
         h, w = coarse.height, coarse.width
         photo = resize_to(gaussians.photo, w, h)
-        coarse_blend = blend_over_background(unpremultiply(coarse.rgb[0], coarse.alpha[0]), coarse.alpha[0],
-                                             resize_to(gaussians.background, w, h))
+        background = resize_to(gaussians.background, w, h)
+        coarse_blend = blend_over_background(unpremultiply(coarse.rgb[0], coarse.alpha[0]), coarse.alpha[0], background)
         photo_mask = resize_to((gaussians.mask > 0).astype(np.uint8), w, h) > 0
         photo_sharpness = _variance_of_laplacian(photo, photo_mask)
         first_second = [t for t in range(min(len(enhanced), int(round(fps)) + 1)) if (coarse.alpha[t] > 0.5).sum() > 100]
         ratios = [_variance_of_laplacian(enhanced[t], coarse.alpha[t] > 0.5) / photo_sharpness for t in first_second]
-        moved = [_variance_of_laplacian(_moved_photograph(coarse, gaussians, t), coarse.alpha[t] > 0.5)
-                 / photo_sharpness for t in first_second]
-        area = [_area_scale(coarse, gaussians, t) for t in first_second]
+        # The moved photograph: the object read from the photograph at source_uv everywhere, no render fallback
+        fine_photo = flow.band_limited_upsample(photo)
+        moved, area = [], []
+        for t in first_second:
+            uv = flow.smooth_source(coarse.source_uv[t] * w / gaussians.width)
+            frame = blend_over_background(flow.photograph_at(fine_photo, uv), coarse.alpha[t], background)
+            moved.append(_variance_of_laplacian(frame, coarse.alpha[t] > 0.5) / photo_sharpness)
+            area.append(_area_scale(uv, coarse.alpha[t] > 0.5))
         never_covered = (coarse.alpha < 1.0 / 255).all(axis=0)
         flicker = np.abs(np.diff(video.astype(np.int16), axis=0))[:, never_covered].mean()
         rows.append(f"| {name} | {len(video)} | {_psnr(enhanced[0], photo):.1f} | {_psnr(video[0], photo):.1f} "
                     f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} / {max(ratios):.2f} "
                     f"| {min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f} | "
-                    + ", ".join(f"{_variance_of_laplacian(_shifted(photo, d), photo_mask) / photo_sharpness:.2f}"
+                    + ", ".join(f"{_variance_of_laplacian(_shifted(fine_photo, d), photo_mask) / photo_sharpness:.2f}"
                                 for d in (0.25, 0.5)) + f" | {min(area):.2f}-{max(area):.2f} | {flicker:.2f} |")
     return "\n".join(rows)
 
