@@ -161,7 +161,7 @@ def enhancement_section(results: Path) -> str:
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
         coarse = read_artifact(folder / "coarse.h5", CoarseArtifact)
         enhanced = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold,
-                                       scene.enhance.hidden_surfaces)
+                                       scene.enhance.hidden_surfaces, scene.enhance.relight)
         video, fps, _ = read_video(folder / "video.mp4")
         h, w = coarse.height, coarse.width
         photo = resize_to(gaussians.photo, w, h)

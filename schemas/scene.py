@@ -179,6 +179,9 @@ class EnhanceConfig(_Strict):
         "photo", description="flow: what surfaces the photograph never saw (the back, an opened interior) show. "
         "photo: the photograph read through the object at source_uv, the texture the reconstruction gave them, "
         "wherever it maps smoothly (source_coherence); render: the coarse render")
+    relight: bool = Field(True, description="flow: re-shade the object for where its surface faces in each frame, "
+                          "under one light fitted to the photograph; skipped when that light explains less than half "
+                          "of the photograph's brightness")
     diffusion: DiffusionSettings = DiffusionSettings()
 
 

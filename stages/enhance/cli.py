@@ -20,7 +20,8 @@ Enhance the coarse render into the final video (paper Sec. 3.4), by the scene's 
   flow       (default, no model weights) the photograph's own pixels, carried along with the
              simulated motion through source_uv and trusted by source_confidence; surfaces the
              photograph never saw read it through the object (enhance.hidden_surfaces: photo) or
-             show the render (render); blended over the inpainted background.
+             show the render (render); re-shaded for where the surface faces now
+             (enhance.relight); blended over the inpainted background.
   diffusion  Stable Diffusion 2.1 + ControlNets from local weights: needs --latents from pm-invert
              (and --lora from pm-lora when enhance.diffusion.lora.enabled).
 Writes the video (H.264) and contact_sheet.png beside it (rows: coarse, input = coarse over the
@@ -47,7 +48,7 @@ def enhance(args: argparse.Namespace) -> None:
     log.info("backend %s, %d frames of %dx%d", backend, len(coarse.alpha), coarse.width, coarse.height)
     if backend == "flow":
         frames = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold,
-                                     scene.enhance.hidden_surfaces)
+                                     scene.enhance.hidden_surfaces, scene.enhance.relight)
     else:
         if args.latents is None:
             raise InputError(args.scene, "enhance.backend", "the diffusion backend needs the inverted latents",

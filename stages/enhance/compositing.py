@@ -1,4 +1,5 @@
-"""Image-space compositing of rendered frames over the inpainted background (paper Sec. 3.4.1).
+"""Image-space compositing of rendered frames over the inpainted background (paper Sec. 3.4.1),
+and the resampling it needs.
 
 Blending in image space rather than latent space keeps object edges sharp and
 temporally stable (the paper's Fig. 7).
@@ -44,3 +45,19 @@ def unpremultiply(rgb_over_black: np.ndarray, alpha: np.ndarray, min_alpha: floa
     a = alpha[..., None].astype(np.float32)
     colour = rgb_over_black.astype(np.float32) / np.maximum(a, min_alpha)
     return np.where(a >= min_alpha, np.clip(colour, 0, 255), 0.0).astype(np.float32)
+
+
+def sample_at(image: np.ndarray, uv: np.ndarray, interpolation: int = cv2.INTER_LINEAR,
+              oversampling: int = 1) -> np.ndarray:
+    """Samples of an image at image points (pixel centres at +0.5), bilinear by default.
+
+    Args:
+        image: (h, w) or (h, w, C) float32 at output resolution, or ``oversampling`` times it
+            as made by :func:`flow.band_limited_upsample`.
+        uv: (h', w', 2) image points at output resolution; NaN where there is nothing to sample.
+    Returns:
+        (h', w') or (h', w', C) float32; 0 where uv is NaN or outside the image.
+    """
+    # cv2.remap puts pixel centres at integers; sample i of the input is sample i * oversampling of the copy
+    maps = np.nan_to_num((uv - 0.5) * oversampling, nan=-10.0 * oversampling).astype(np.float32)
+    return cv2.remap(image, maps[..., 0], maps[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)

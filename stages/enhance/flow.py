@@ -10,7 +10,8 @@ colour the reconstruction gave it: with ``hidden_surfaces="photo"`` we read the
 photograph there too, wherever the map is smooth, which keeps the photograph's
 detail where the render would blur it; with ``"render"`` we keep the render.
 Where the map is not smooth (tumbling, flowing material) the render is used.
-The result is blended over the inpainted background with the rendered alpha.
+The photograph's shading is then moved from where the surface faced at rest to
+where it faces now (relight.py), and the result is blended over the inpainted background with the rendered alpha.
 """
 from __future__ import annotations
 
@@ -22,7 +23,8 @@ from scipy import signal
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import blend_over_background, resize_to, unpremultiply
+from .compositing import blend_over_background, resize_to, sample_at, unpremultiply
+from .relight import Relighting
 
 log = logging.getLogger("physmotion.enhance.flow")
 
@@ -47,22 +49,6 @@ photograph moved by a quarter / half a pixel kept 0.75 / 0.59 of its variance of
 read from the copy it keeps 0.95 / 0.99, and whole-pixel offsets stay exact."""
 PAD_PX = 16
 """Reflected border added before the FFT, so that its wrap-around does not ring into the image."""
-
-
-def sample_at(image: np.ndarray, uv: np.ndarray, interpolation: int = cv2.INTER_LINEAR,
-              oversampling: int = 1) -> np.ndarray:
-    """Samples of an image at image points (pixel centres at +0.5), bilinear by default.
-
-    Args:
-        image: (h, w) or (h, w, C) float32 at output resolution, or ``oversampling`` times it
-            as made by :func:`band_limited_upsample`.
-        uv: (h', w', 2) image points at output resolution; NaN where there is nothing to sample.
-    Returns:
-        (h', w') or (h', w', C) float32; 0 where uv is NaN or outside the image.
-    """
-    # cv2.remap puts pixel centres at integers; sample i of the input is sample i * oversampling of the copy
-    maps = np.nan_to_num((uv - 0.5) * oversampling, nan=-10.0 * oversampling).astype(np.float32)
-    return cv2.remap(image, maps[..., 0], maps[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
 def band_limited_upsample(image: np.ndarray, factor: int = OVERSAMPLING) -> np.ndarray:
@@ -105,7 +91,7 @@ def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:
 
 
 def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float,
-                   hidden_surfaces: str = "photo") -> np.ndarray:
+                   hidden_surfaces: str = "photo", relight: bool = True) -> np.ndarray:
     """The flow-enhanced video.
 
     Args:
@@ -114,14 +100,18 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         threshold: source_confidence (source_coherence, for hidden surfaces read as "photo") above which
             the photograph is trusted.
         hidden_surfaces: "photo" or "render", see the module docstring.
+        relight: re-shade the object for where its surface faces in each frame (relight.py),
+            when one light explains the photograph's shading.
     Returns:
         (T, h, w, 3) uint8 RGB frames.
     """
     T, h, w = coarse.alpha.shape
     scale = w / gaussians.width  # full-resolution image points -> output image points
-    fine_photo = band_limited_upsample(resize_to(gaussians.photo, w, h))
+    photo = resize_to(gaussians.photo, w, h)
+    fine_photo = band_limited_upsample(photo)
     background = resize_to(gaussians.background, w, h)
     coverage = object_coverage(gaussians.mask, w, h)
+    relighting = Relighting.fit(coarse, photo) if relight else None
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
         uv = smooth_source(coarse.source_uv[t] * scale)
@@ -132,6 +122,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         weight = (trusted * sample_at(coverage, uv))[..., None]
         rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
         colour = weight * from_photo + (1.0 - weight) * rendered
+        if relighting is not None:
+            colour = relighting(t, colour, uv)
         frames[t] = blend_over_background(colour, coarse.alpha[t], background)
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph", t + 1, T,
                  100.0 * float(weight[..., 0][coarse.alpha[t] > 0.5].mean()) if (coarse.alpha[t] > 0.5).any() else 0.0)

@@ -1,0 +1,175 @@
+"""Re-shading the photograph's pixels: its light stays where it was while the surface turns.
+
+The photograph's colour at a surface point is albedo x shading, and the shading
+belongs to the point's orientation at rest, not to the point: a ball that rolls
+over carries its dark underside into the light. We fit one distant light to the
+photograph on the reconstruction's normals (first-order spherical harmonics:
+brightness = ambient + light . n) and scale each pixel's colour, in linear
+light, by shading(normal now) / shading(normal where it was in the photograph).
+When one light does not explain the photograph's brightness (a flat graphic, a
+scene lit from everywhere, texture that dominates shading) we leave it as it
+is: a wrong light would paint shading onto the video.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+
+from schemas.artifacts import CoarseArtifact
+from stages.reconstruct.geometry import pixel_rays
+
+from .compositing import sample_at
+
+log = logging.getLogger("physmotion.enhance.relight")
+
+MIN_EXPLAINED = 0.5
+"""The light is used only if it explains at least this fraction (R^2) of the brightness variance
+inside the objects. Measured: ball 0.89, coffee 0.27, logo 0.27 (benchmarks/RESULTS.md)."""
+NORMAL_SMOOTHING = 0.03
+"""Blur of the rendered surface (standard deviation) per object size (square root of its pixel
+count): shading is smooth, while the Gaussians' own relief and the depth's jitter are not."""
+RIM_PX = 3
+"""Pixels along the silhouette, whose blended depth gives no normal, are left out of the fit."""
+FLOOR = 0.05
+"""Shading is never taken below this fraction of its brightest (ambient + |light|): the photograph's
+darkest pixels hold little but noise, so dividing by their shading must stay bounded."""
+MAX_GAIN = 3.0
+"""Shading ratios are clipped to [1/MAX_GAIN, MAX_GAIN]."""
+
+
+def to_linear(srgb: np.ndarray) -> np.ndarray:
+    """sRGB in [0, 255] -> linear light in [0, 1] (IEC 61966-2-1)."""
+    x = np.clip(srgb / 255.0, 0.0, 1.0)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def to_srgb(linear: np.ndarray) -> np.ndarray:
+    """Linear light in [0, 1] -> sRGB in [0, 255] (clipped)."""
+    x = np.clip(linear, 0.0, 1.0)
+    return 255.0 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def surface_normals(depth: np.ndarray, alpha: np.ndarray, K: np.ndarray, sigma_px: float) -> np.ndarray:
+    """Camera-space unit normals (h, w, 3) of a rendered surface, facing the camera; NaN off it.
+
+    Args:
+        depth: (h, w) alpha-weighted distance to the camera centre, m (splat's depth).
+        alpha: (h, w) coverage; the surface is where it exceeds 0.5.
+        K: (3, 3) intrinsics of the render.
+        sigma_px: the normals are blurred by this much (a normalised blur over the surface's own
+            pixels, so the background does not bend the rim).
+    """
+    h, w = alpha.shape
+    on = alpha > 0.5
+    rays = pixel_rays(K, h, w)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    points = rays * (depth / np.maximum(alpha, 1e-6))[..., None]
+    normals = np.cross(_surface_difference(points, on, axis=1), _surface_difference(points, on, axis=0))
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
+    normals *= -np.sign(np.sum(normals * rays, axis=-1, keepdims=True))  # towards the camera
+    valid = (on & np.isfinite(normals).all(-1)).astype(np.float32)
+    weight = cv2.GaussianBlur(valid, (0, 0), sigma_px)
+    normals = cv2.GaussianBlur((np.nan_to_num(normals) * valid[..., None]).astype(np.float32), (0, 0), sigma_px)
+    normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
+    return np.where(on[..., None] & (weight[..., None] > 0.01), normals, np.nan).astype(np.float32)
+
+
+def _surface_difference(points: np.ndarray, on: np.ndarray, axis: int) -> np.ndarray:
+    """(h, w, 3) change of ``points`` per pixel along ``axis``, from neighbours on the surface only:
+    central where both are, one-sided at the rim, NaN where neither is."""
+    ahead, behind = (np.roll(a, -1, axis=axis) for a in (points, on)), (np.roll(a, 1, axis=axis) for a in (points, on))
+    (p_ahead, on_ahead), (p_behind, on_behind) = ahead, behind
+    edge = [slice(None)] * 2
+    edge[axis] = -1
+    on_ahead[tuple(edge)] = False  # np.roll wraps around the border
+    edge[axis] = 0
+    on_behind[tuple(edge)] = False
+    on_ahead, on_behind = (on & on_ahead)[..., None], (on & on_behind)[..., None]
+    central = (p_ahead - p_behind) / 2
+    return np.where(on_ahead & on_behind, central,
+                    np.where(on_ahead, p_ahead - points, np.where(on_behind, points - p_behind, np.nan)))
+
+
+@dataclass(frozen=True)
+class Shading:
+    """brightness(n) = ambient + light . n, for camera-space unit normals n, floored (see FLOOR)."""
+
+    ambient: float
+    light: np.ndarray  # (3,)
+
+    def __call__(self, normals: np.ndarray) -> np.ndarray:
+        brightest = self.ambient + float(np.linalg.norm(self.light))
+        return np.maximum(self.ambient + normals @ self.light, FLOOR * brightest)
+
+
+def fit_shading(value: np.ndarray, normals: np.ndarray, pixels: np.ndarray) -> tuple[Shading, float]:
+    """Least-squares light of a photograph, and the fraction of brightness variance it explains.
+
+    Args:
+        value: (h, w) linear brightness, the largest of the three channels: a hue change at the
+            same brightness (red to yellow stripes) leaves it alone, so it follows shading.
+        normals: (h, w, 3) camera-space unit normals at rest.
+        pixels: (h, w) bool, where to fit.
+    Returns:
+        The shading and its R^2 over ``pixels``.
+    """
+    v = value[pixels].astype(np.float64)
+    design = np.concatenate([np.ones((len(v), 1)), normals[pixels].astype(np.float64)], axis=1)
+    coef, *_ = np.linalg.lstsq(design, v, rcond=None)
+    explained = 1.0 - np.mean((design @ coef - v) ** 2) / max(float(np.var(v)), 1e-12)
+    return Shading(float(coef[0]), coef[1:]), float(explained)
+
+
+class Relighting:
+    """The shading ratio of every frame of a coarse video, from the light fitted to its photograph.
+
+    Use :meth:`fit`, which returns None when one light does not explain the photograph.
+    """
+
+    def __init__(self, coarse: CoarseArtifact, shading: Shading, sigma_px: float, rest_normals: np.ndarray):
+        self.coarse, self.shading, self.sigma_px, self.rest_normals = coarse, shading, sigma_px, rest_normals
+
+    @classmethod
+    def fit(cls, coarse: CoarseArtifact, photo: np.ndarray) -> Optional["Relighting"]:
+        """Fit on frame 0 (the reconstruction at rest, seen as in the photograph).
+
+        Args:
+            coarse: the render; frame 0's depth gives the photograph's normals.
+            photo: (h, w, 3) the photograph at the render's size, sRGB in [0, 255].
+        """
+        on = coarse.alpha[0] > 0.5
+        if on.sum() < 50:
+            return None
+        sigma = max(1.0, NORMAL_SMOOTHING * float(np.sqrt(on.sum())))
+        normals = surface_normals(coarse.depth[0], coarse.alpha[0], coarse.K, sigma)
+        inner = cv2.erode(on.astype(np.uint8), np.ones((2 * RIM_PX + 1,) * 2, np.uint8)) > 0
+        shading, explained = fit_shading(to_linear(photo.astype(np.float64)).max(axis=-1), normals, inner)
+        if explained < MIN_EXPLAINED:
+            log.info("relighting off: one light explains %.0f%% of the photograph's brightness (needs %.0f%%)",
+                     100 * explained, 100 * MIN_EXPLAINED)
+            return None
+        direction = shading.light / (np.linalg.norm(shading.light) + 1e-12)
+        log.info("relighting: light towards (%.2f, %.2f, %.2f) in the camera frame, ambient %.2f, "
+                 "explains %.0f%% of the photograph's brightness", *direction, shading.ambient, 100 * explained)
+        return cls(coarse, shading, sigma, normals)
+
+    def gain(self, t: int, uv: np.ndarray) -> np.ndarray:
+        """(h, w) float32: shading of frame t's surface over the shading its source had in the photograph.
+
+        Args:
+            uv: (h, w, 2) frame t's source points at output resolution (flow.smooth_source).
+        """
+        now = surface_normals(self.coarse.depth[t], self.coarse.alpha[t], self.coarse.K, self.sigma_px)
+        then = sample_at(np.nan_to_num(self.rest_normals), uv)
+        then /= np.linalg.norm(then, axis=-1, keepdims=True) + 1e-12
+        ratio = np.clip(self.shading(now) / self.shading(then), 1.0 / MAX_GAIN, MAX_GAIN)
+        ratio = np.where(np.isfinite(uv[..., 0]), ratio, 1.0)  # no source: nothing to re-shade
+        return np.nan_to_num(ratio, nan=1.0).astype(np.float32)
+
+    def __call__(self, t: int, colour: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """Frame t's object colour (h, w, 3) in [0, 255] re-shaded for where its surface faces now."""
+        return to_srgb(to_linear(colour) * self.gain(t, uv)[..., None]).astype(np.float32)
