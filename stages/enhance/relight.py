@@ -34,10 +34,12 @@ NORMAL_SMOOTHING = 0.03
 count): shading is smooth, while the Gaussians' own relief and the depth's jitter are not."""
 RIM_PX = 3
 """Pixels along the silhouette, whose blended depth gives no normal, are left out of the fit."""
-FLOOR = 0.05
-"""Shading is never taken below this fraction of its brightest (ambient + |light|): the photograph's
-darkest pixels hold little but noise, so dividing by their shading must stay bounded."""
-MAX_GAIN = 3.0
+FLOOR = 0.15
+"""Shading is never taken below this fraction of its brightest (ambient + |light|): near the
+terminator the photograph holds little but noise and a small error in the normal moves the
+terminator, so dividing by that shading must stay bounded (at 5 %, with gains up to 3, the ball
+showed bright blotches along its terminator)."""
+MAX_GAIN = 2.5
 """Shading ratios are clipped to [1/MAX_GAIN, MAX_GAIN]."""
 
 
