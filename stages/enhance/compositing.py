@@ -61,3 +61,19 @@ def sample_at(image: np.ndarray, uv: np.ndarray, interpolation: int = cv2.INTER_
     # cv2.remap puts pixel centres at integers; sample i of the input is sample i * oversampling of the copy
     maps = np.nan_to_num((uv - 0.5) * oversampling, nan=-10.0 * oversampling).astype(np.float32)
     return cv2.remap(image, maps[..., 0], maps[..., 1], interpolation, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+def normalised_blur(values: np.ndarray, valid: np.ndarray, sigma_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gaussian blur over the valid pixels only, so that invalid ones (NaN, off the object) pull nothing in.
+
+    Args:
+        values: (h, w, C) float; anything where not valid.
+        valid: (h, w) bool.
+    Returns:
+        The weighted mean of the valid neighbours (h, w, C) float32 (meaningless where the weight is 0),
+        and that weight (h, w): the blurred valid mask.
+    """
+    mask = valid.astype(np.float32)
+    weight = cv2.GaussianBlur(mask, (0, 0), sigma_px)
+    blurred = cv2.GaussianBlur((np.nan_to_num(values) * mask[..., None]).astype(np.float32), (0, 0), sigma_px)
+    return blurred / np.maximum(weight, 1e-6)[..., None], weight

@@ -23,7 +23,7 @@ from scipy import signal
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import blend_over_background, resize_to, sample_at, unpremultiply
+from .compositing import blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
 from .relight import Relighting
 
 log = logging.getLogger("physmotion.enhance.flow")
@@ -78,10 +78,9 @@ def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.n
     Args:
         uv: (h, w, 2) image points, NaN where there is no surface.
     """
-    valid = np.isfinite(uv[..., 0]).astype(np.float32)
-    weighted = cv2.GaussianBlur(np.nan_to_num(uv).astype(np.float32) * valid[..., None], (0, 0), sigma_px)
-    weight = cv2.GaussianBlur(valid, (0, 0), sigma_px)
-    return np.where(valid[..., None] > 0, weighted / np.maximum(weight, 1e-6)[..., None], np.nan)
+    valid = np.isfinite(uv[..., 0])
+    mean, _ = normalised_blur(uv, valid, sigma_px)
+    return np.where(valid[..., None], mean, np.nan)
 
 
 def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:

@@ -22,7 +22,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact
 from stages.reconstruct.geometry import pixel_rays
 
-from .compositing import sample_at
+from .compositing import normalised_blur, sample_at
 
 log = logging.getLogger("physmotion.enhance.relight")
 
@@ -73,9 +73,7 @@ def surface_normals(depth: np.ndarray, alpha: np.ndarray, K: np.ndarray, sigma_p
     normals = np.cross(_surface_difference(points, on, axis=1), _surface_difference(points, on, axis=0))
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
     normals *= -np.sign(np.sum(normals * rays, axis=-1, keepdims=True))  # towards the camera
-    valid = (on & np.isfinite(normals).all(-1)).astype(np.float32)
-    weight = cv2.GaussianBlur(valid, (0, 0), sigma_px)
-    normals = cv2.GaussianBlur((np.nan_to_num(normals) * valid[..., None]).astype(np.float32), (0, 0), sigma_px)
+    normals, weight = normalised_blur(normals, on & np.isfinite(normals).all(-1), sigma_px)
     normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
     return np.where(on[..., None] & (weight[..., None] > 0.01), normals, np.nan).astype(np.float32)
 
@@ -83,8 +81,8 @@ def surface_normals(depth: np.ndarray, alpha: np.ndarray, K: np.ndarray, sigma_p
 def _surface_difference(points: np.ndarray, on: np.ndarray, axis: int) -> np.ndarray:
     """(h, w, 3) change of ``points`` per pixel along ``axis``, from neighbours on the surface only:
     central where both are, one-sided at the rim, NaN where neither is."""
-    ahead, behind = (np.roll(a, -1, axis=axis) for a in (points, on)), (np.roll(a, 1, axis=axis) for a in (points, on))
-    (p_ahead, on_ahead), (p_behind, on_behind) = ahead, behind
+    p_ahead, on_ahead = np.roll(points, -1, axis=axis), np.roll(on, -1, axis=axis)
+    p_behind, on_behind = np.roll(points, 1, axis=axis), np.roll(on, 1, axis=axis)
     edge = [slice(None)] * 2
     edge[axis] = -1
     on_ahead[tuple(edge)] = False  # np.roll wraps around the border
