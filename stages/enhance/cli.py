@@ -5,6 +5,8 @@ import argparse
 import logging
 from pathlib import Path
 
+import numpy as np
+
 from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, read_artifact
 from schemas.video import write_video
@@ -57,9 +59,13 @@ def enhance(args: argparse.Namespace) -> None:
 
         latents = read_artifact(args.latents, LatentsArtifact)
         frames = enhance_video(scene, coarse, gaussians, latents, args.lora, device)
+    # Rows as the eye compares them: the photograph (the same in every column, for its detail), the
+    # coarse render over the inpainted background (what the simulation alone gives), the enhanced video.
+    photo = resize_to(gaussians.photo, coarse.width, coarse.height)
     background = resize_to(gaussians.background, coarse.width, coarse.height)
-    sheet = contact_sheet({"coarse": coarse.rgb, "input": blend_over_background(
-        unpremultiply(coarse.rgb, coarse.alpha), coarse.alpha, background), "enhanced": frames}, coarse.fps)
+    coarse_over_background = blend_over_background(unpremultiply(coarse.rgb, coarse.alpha), coarse.alpha, background)
+    sheet = contact_sheet({"input": np.broadcast_to(photo, frames.shape), "coarse": coarse_over_background,
+                           "enhanced": frames}, coarse.fps)
     write_video(args.out, frames, coarse.fps)
     write_png(args.out.with_name("contact_sheet.png"), sheet)
     log.info("wrote %s (config %s)", args.out, config_hash(stage_keys(scene, "enhance"))[:12])

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import warp as wp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
@@ -18,14 +17,13 @@ from schemas.scene import PhysicsConfig
 from stages.simulate.simulation import Simulation
 from stages.simulate.synthetic import boxes
 
-wp.config.quiet = True
 G = 9.81
 CUBE = ((0.0, 0.0, 0.0), (0.1, 0.1, 0.1))
 
 
-def simulate(physics: dict, materials: list, *extents, spacing: float = 0.01):
+def simulate(device: str, physics: dict, materials: list, *extents, spacing: float = 0.01):
     means, object_id = boxes(*extents, spacing=spacing)
-    sim = Simulation(PhysicsConfig(**physics), materials, means, object_id)
+    sim = Simulation(PhysicsConfig(**physics), materials, means, object_id, device=device)
     return sim, sim.run()
 
 
@@ -50,9 +48,9 @@ def pieces(points: np.ndarray, link: float, min_size: int) -> int:
     return int(np.sum(np.bincount(labels) >= min_size))
 
 
-def test_free_fall_follows_g_t2_over_2():
+def test_free_fall_follows_g_t2_over_2(device):
     """Centre of mass falls g t^2 / 2: MPM's gravity update is exact for a uniform field (tol 1 % of the drop)."""
-    sim, tr = simulate(dict(duration_s=0.2, fps=10, gravity=[0, G, 0], grid=24, ground={"enabled": False}),
+    sim, tr = simulate(device, dict(duration_s=0.2, fps=10, gravity=[0, G, 0], grid=24, ground={"enabled": False}),
                        [M.Jelly()], ((0, 0, 0), (0.15, 0.15, 0.15)))
     drop = centre_of_mass(tr)[:, 1] - centre_of_mass(tr)[0, 1]
     expected = 0.5 * G * tr.time_s ** 2
@@ -60,10 +58,10 @@ def test_free_fall_follows_g_t2_over_2():
     assert np.all(np.isfinite(tr.positions))
 
 
-def test_impulse_in_zero_gravity_conserves_momentum():
+def test_impulse_in_zero_gravity_conserves_momentum(device):
     """An impulse on a corner gives the body momentum M_region dv, which then stays constant (tol 0.5 %)."""
     dv = np.array([0.5, -0.2, 0.1])
-    sim, tr = simulate(dict(duration_s=0.2, fps=20, gravity=[0, 0, 0], grid=24, ground={"enabled": False},
+    sim, tr = simulate(device, dict(duration_s=0.2, fps=20, gravity=[0, 0, 0], grid=24, ground={"enabled": False},
                             conditions=[{"type": "impulse", "region": {"box": [0, 0, 0, 0.5, 0.5, 0.5]},
                                          "velocity": dv.tolist()}]),
                        [M.Jelly()], CUBE)
@@ -76,10 +74,10 @@ def test_impulse_in_zero_gravity_conserves_momentum():
     assert np.max(np.linalg.norm(L - L[0], axis=1)) < 1e-2 * np.linalg.norm(L[0])
 
 
-def test_torque_grows_angular_momentum_at_the_applied_rate():
+def test_torque_grows_angular_momentum_at_the_applied_rate(device):
     """dL/dt = tau about the centre of mass while the torque acts, no net force (tol 3 % of tau t)."""
     tau = np.array([0.0, 0.0, 0.02])
-    sim, tr = simulate(dict(duration_s=0.2, fps=20, gravity=[0, 0, 0], grid=24, ground={"enabled": False},
+    sim, tr = simulate(device, dict(duration_s=0.2, fps=20, gravity=[0, 0, 0], grid=24, ground={"enabled": False},
                             conditions=[{"type": "torque", "torque": tau.tolist(), "start_s": 0.0, "end_s": 0.1}]),
                        [M.Jelly(youngs_modulus=1e5)], CUBE)
     on = tr.time_s <= 0.1 + 1e-9
@@ -90,9 +88,9 @@ def test_torque_grows_angular_momentum_at_the_applied_rate():
     assert np.max(np.abs(tr.momentum)) < 1e-3  # a pure torque: no net force
 
 
-def drop(material, seconds=0.4):
+def drop(device, material, seconds=0.4):
     """A 10 cm cube thrown down at 2 m/s onto the ground it rests on (Coulomb friction 0.5)."""
-    return simulate(dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=20,
+    return simulate(device, dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=20,
                          ground={"enabled": True, "type": "friction", "friction": 0.5},
                          conditions=[{"type": "impulse", "velocity": [0, 2.0, 0]}]),
                     [material], CUBE)
@@ -102,24 +100,24 @@ def rms(d):
     return np.sqrt(np.mean(d * d))
 
 
-def test_jelly_bounces_and_recovers_while_metal_keeps_a_dent():
+def test_jelly_bounces_and_recovers_while_metal_keeps_a_dent(device):
     """Jelly bounces (its centre of mass rises above the start) and its shape returns to within 3 % of the
     cube size (RMS, after rigid alignment); metal under the same impact keeps a permanent deformation
     over 3 % that no longer changes, and at least twice jelly's."""
-    _, jelly = drop(M.Jelly(youngs_modulus=2e5))
+    _, jelly = drop(device, M.Jelly(youngs_modulus=2e5))
     rise = centre_of_mass(jelly)[:, 1] - centre_of_mass(jelly)[0, 1]
     assert rise.min() < -0.005  # world y is down
     jelly_error = shape_error(jelly.rest_positions, jelly.positions[-1], rms)
     assert jelly_error < 0.03 * 0.1
-    _, metal = drop(M.Metal())
+    _, metal = drop(device, M.Metal())
     metal_error = [shape_error(metal.rest_positions, metal.positions[f], rms) for f in (-3, -1)]
     assert metal_error[-1] > max(0.03 * 0.1, 2.0 * jelly_error)
     assert metal_error[-1] == pytest.approx(metal_error[0], rel=0.1)
 
 
-def test_rigid_keeps_its_shape():
+def test_rigid_keeps_its_shape(device):
     """Rigid bodies have no strain: shape error under 1 % of the size at every frame, F a rotation."""
-    sim, tr = simulate(dict(duration_s=0.4, fps=10, gravity=[0, G, 0], grid=24,
+    sim, tr = simulate(device, dict(duration_s=0.4, fps=10, gravity=[0, G, 0], grid=24,
                             ground={"enabled": True, "type": "friction", "friction": 0.5},
                             conditions=[{"type": "impulse", "region": {"box": [0, 0, 0, 0.5, 1, 1]},
                                          "velocity": [1.0, 1.0, 0.0]}]),
@@ -132,10 +130,10 @@ def test_rigid_keeps_its_shape():
     assert np.linalg.norm(centre_of_mass(tr)[-1] - centre_of_mass(tr)[0]) > 0.02  # it did move
 
 
-def test_sand_column_collapses_to_a_pile():
+def test_sand_column_collapses_to_a_pile(device):
     """A sand column slumps: it gets lower and wider, with a slope flatter than its 35 degree friction angle
     but steeper than 5 degrees (granular column collapse ends between the two)."""
-    sim, tr = simulate(dict(duration_s=0.5, fps=10, gravity=[0, G, 0], grid=24,
+    sim, tr = simulate(device, dict(duration_s=0.5, fps=10, gravity=[0, G, 0], grid=24,
                             ground={"enabled": True, "type": "friction", "friction": 0.5}),
                        [M.Sand(friction_angle_deg=35)], ((0, 0, 0), (0.06, 0.15, 0.06)))
     up = -tr.positions[..., 1]  # world y is down
@@ -149,9 +147,9 @@ def test_sand_column_collapses_to_a_pile():
     assert np.max(np.abs(np.diff(centre_of_mass(tr)[-3:], axis=0))) < 0.01  # it has come to rest
 
 
-def test_fracture_tears_into_pieces():
+def test_fracture_tears_into_pieces(device):
     """A bar pulled apart at both ends breaks: at least two separate pieces of 50+ particles."""
-    sim, tr = simulate(dict(duration_s=0.3, fps=10, gravity=[0, 0, 0], grid=32, ground={"enabled": False},
+    sim, tr = simulate(device, dict(duration_s=0.3, fps=10, gravity=[0, 0, 0], grid=32, ground={"enabled": False},
                             conditions=[
                                 {"type": "velocity", "region": {"box": [0, 0, 0, 0.15, 1, 1]}, "velocity": [-1, 0, 0]},
                                 {"type": "velocity", "region": {"box": [0.85, 0, 0, 1, 1, 1]}, "velocity": [1, 0, 0]}]),
@@ -161,9 +159,9 @@ def test_fracture_tears_into_pieces():
     assert pieces(tr.positions[0], 1.5 * spacing, 50) == 1
 
 
-def test_two_objects_collide_without_interpenetration():
+def test_two_objects_collide_without_interpenetration(device):
     """Two jelly cubes thrown at each other touch, push apart and never overlap by more than a cell."""
-    sim, tr = simulate(dict(duration_s=0.3, fps=30, gravity=[0, 0, 0], grid=32, ground={"enabled": False},
+    sim, tr = simulate(device, dict(duration_s=0.3, fps=30, gravity=[0, 0, 0], grid=32, ground={"enabled": False},
                             conditions=[{"type": "impulse", "object": 0, "velocity": [1.0, 0, 0]},
                                         {"type": "impulse", "object": 1, "velocity": [-1.0, 0, 0]}]),
                        [M.Jelly(), M.Jelly()], ((0, 0, 0), (0.08, 0.08, 0.08)), ((0.2, 0, 0), (0.28, 0.08, 0.08)))
@@ -176,12 +174,12 @@ def test_two_objects_collide_without_interpenetration():
 
 
 @pytest.mark.parametrize("ground", ["slip", "friction"])
-def test_ground_slip_and_coulomb_friction(ground):
+def test_ground_slip_and_coulomb_friction(device, ground):
     """An 8 cm block sliding at v0 on slip ground keeps v0 (travel v0 t, tol 5 %); on Coulomb ground with
     friction mu it stops after v0^2 / (2 mu g) (tol 20 %: the contact layer is a grid cell thick)."""
     v0, mu = (0.5, 0.4) if ground == "slip" else (1.0, 0.4)
     seconds = 0.25 if ground == "slip" else 0.35
-    sim, tr = simulate(dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=32,
+    sim, tr = simulate(device, dict(duration_s=seconds, fps=20, gravity=[0, G, 0], grid=32,
                             ground={"enabled": True, "type": ground, "friction": mu},
                             conditions=[{"type": "impulse", "velocity": [v0, 0, 0]}]),
                        [M.Jelly(youngs_modulus=1e5)], ((0, 0, 0), (0.08, 0.08, 0.08)))
@@ -194,11 +192,11 @@ def test_ground_slip_and_coulomb_friction(ground):
 
 
 @pytest.mark.parametrize("preset", M.PRESETS)
-def test_every_preset_runs_without_nan(preset):
+def test_every_preset_runs_without_nan(device, preset):
     """Each preset with its defaults survives a thrown cube hitting the ground, with bounded energy."""
     material = {"jelly": M.Jelly, "metal": M.Metal, "sand": M.Sand, "plasticine": M.Plasticine, "foam": M.Foam,
                 "snow": M.Snow, "rigid": M.Rigid, "fracture": M.Fracture}[preset]()
-    sim, tr = simulate(dict(duration_s=0.15, fps=20, gravity=[0, G, 0], grid=16,
+    sim, tr = simulate(device, dict(duration_s=0.15, fps=20, gravity=[0, G, 0], grid=16,
                             conditions=[{"type": "impulse", "velocity": [0.5, 1.0, 0.0]}]),
                        [material], CUBE)
     assert np.all(np.isfinite(tr.positions)) and np.all(np.isfinite(tr.F))
