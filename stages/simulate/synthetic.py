@@ -7,7 +7,9 @@ import numpy as np
 def box_surface(lo, hi, spacing: float) -> np.ndarray:
     """Points (N,3) on the six faces of the axis-aligned box [lo, hi] (m), about `spacing` apart."""
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
-    axes = [np.linspace(lo[a], hi[a], max(2, int(np.ceil((hi[a] - lo[a]) / spacing)) + 1)) for a in range(3)]
+    # round() before ceil: 0.28 - 0.2 is 0.08000000000000002, which must not buy a box an extra row
+    steps = [int(np.ceil(round((hi[a] - lo[a]) / spacing, 9))) for a in range(3)]
+    axes = [np.linspace(lo[a], hi[a], max(2, steps[a] + 1)) for a in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), -1)
     on_face = np.zeros(grid.shape[:3], bool)
     for a in range(3):
