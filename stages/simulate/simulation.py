@@ -70,12 +70,16 @@ class Simulation:
                    ground=physics.ground.enabled, walls=physics.walls)
 
         # the cell size comes from the Gaussians; the final grid also covers the fill
-        dx = domain.fit_grid(means @ self.Q.T, physics.grid, **fit).dx
+        means_sim = means @ self.Q.T
+        dx = domain.fit_grid(means_sim, physics.grid, **fit).dx
         fills, gauss_volume = [], np.zeros(len(means))
         for k in range(len(self.materials)):
             sel = object_id == k
-            fill, gauss_volume[sel], fill_volume = fill_object(means[sel], dx, physics.particles_per_cell)
-            fills.append((fill, fill_volume, k))
+            # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
+            # lattice along the camera's axes meets a pitched ground with a staircase that lands on
+            # one side first and spins the body (tests/simulate: a sphere on slip ground).
+            fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell)
+            fills.append((fill @ self.Q, fill_volume, k))
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
         self.object_id = np.concatenate([object_id] + [np.full(len(f), k) for f, _, k in fills])
