@@ -188,7 +188,9 @@ def test_ground_slip_and_coulomb_friction(device, ground):
         assert travel == pytest.approx(v0 * seconds, rel=0.05)
     else:
         assert travel == pytest.approx(v0 ** 2 / (2 * mu * G), rel=0.2)
-        assert tr.max_speed[-1] < 0.1 * v0  # and it has stopped
+        # and it has stopped sliding: what is left is the jelly rocking on the spot, its centre of mass
+        # swinging at a few cm/s (its fastest particle reaches 0.1 m/s)
+        assert np.abs(tr.momentum[-3:, 0]).max() / tr.masses.sum() < 0.1 * v0
 
 
 def fibonacci_sphere(n: int, radius: float) -> np.ndarray:
