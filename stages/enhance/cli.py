@@ -26,8 +26,8 @@ Enhance the coarse render into the final video (paper Sec. 3.4), by the scene's 
              (enhance.relight); blended over the inpainted background.
   diffusion  Stable Diffusion 2.1 + ControlNets from local weights: needs --latents from pm-invert
              (and --lora from pm-lora when enhance.diffusion.lora.enabled).
-Writes the video (H.264) and contact_sheet.png beside it (rows: coarse, input = coarse over the
-background, enhanced)."""
+Writes the video (H.264) and contact_sheet.png beside it (rows: input = the photograph, coarse =
+the render over the inpainted background, enhanced)."""
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -32,12 +32,17 @@ def centre_of_mass(tr, select=None):
     return (m @ tr.positions) / m.sum()
 
 
+def best_rotation(a: np.ndarray, b: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """(3, 3) rotation R that best takes the centred points a (N, 3) onto b, b ~ a R^T (Kabsch)."""
+    w = np.ones(len(a)) if weights is None else weights
+    U, _, Vt = np.linalg.svd((b * w[:, None]).T @ a)
+    return U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+
+
 def shape_error(rest: np.ndarray, now: np.ndarray, reduce=np.max) -> float:
     """Largest (or `reduce`d) distance in m between `now` and `rest` after the best rigid alignment (Kabsch)."""
     a, b = rest - rest.mean(0), now - now.mean(0)
-    U, _, Vt = np.linalg.svd(b.T @ a)
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-    return float(reduce(np.linalg.norm(b - a @ (U @ D @ Vt).T, axis=1)))
+    return float(reduce(np.linalg.norm(b - a @ best_rotation(a, b).T, axis=1)))
 
 
 def pieces(points: np.ndarray, link: float, min_size: int) -> int:
@@ -204,8 +209,7 @@ def turned_deg(tr, frame: int) -> float:
     """Angle in degrees of the best rotation (mass-weighted Kabsch) from rest to ``frame``."""
     rest = tr.rest_positions - centre_of_mass(tr)[0]
     now = tr.positions[frame] - centre_of_mass(tr)[frame]
-    U, _, Vt = np.linalg.svd((now * tr.masses[:, None]).T @ rest)
-    R = U @ np.diag([1.0, 1.0, np.linalg.det(U @ Vt)]) @ Vt
+    R = best_rotation(rest, now, tr.masses)
     return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
 
 
