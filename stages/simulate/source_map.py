@@ -1,0 +1,201 @@
+"""Where each pixel of a coarse frame was in the photograph at rest, and how far to trust it.
+
+Each Gaussian carries, per frame, an affine map from the frame's image points to
+the photograph's (:func:`affine_source_maps`). Blended by the rasterizer like any
+feature, the maps give every pixel its source point; at rest they are the
+identity for every Gaussian, so the source map is exact there without any fit,
+and under motion each Gaussian carries its own patch of the photograph with it.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+import splat
+from schemas.artifacts import GaussiansArtifact
+
+MIN_ALPHA = 1.0 / 255
+"""Below this accumulated alpha a pixel shows no surface: source_uv is NaN there."""
+SMOOTH_SOURCE_PX = (2.0, 5.0)
+"""Roughness of the source map (output pixels, see source_roughness) up to which the photograph
+is fully trusted, and from which it is not trusted at all. Where a surface tumbles or flows
+neighbouring pixels read places of the photograph tens or hundreds of pixels apart."""
+MIN_GRAZING_COS = 0.1
+"""Cosine between the normal of a Gaussian's plane and the view ray below which its lift is clamped: a plane
+seen edge-on would map one pixel of the frame onto an unbounded stretch of the photograph."""
+MIN_VOTE = 0.01
+"""Vote on a pixel's source of a Gaussian that is not on the surface in front, so that a pixel
+showing only such Gaussians still gets a source."""
+SURFACE_NEIGHBOURS = 16
+"""Nearest Gaussian centres whose plane of least spread is taken as the surface at a Gaussian."""
+AFFINE_CHANNELS = 6
+"""Feature channels of an affine source map: the offset b (2) and the Jacobian J row-major (4)."""
+
+
+def full_camera(gaussians: GaussiansArtifact) -> splat.Camera:
+    """The photograph's camera, at its full resolution."""
+    return splat.Camera(torch.as_tensor(gaussians.K), torch.as_tensor(gaussians.world_to_camera),
+                        gaussians.width, gaussians.height)
+
+
+def _to_camera(points: torch.Tensor, gaussians: GaussiansArtifact) -> torch.Tensor:
+    w2c = torch.as_tensor(gaussians.world_to_camera, dtype=points.dtype, device=points.device)
+    return points @ w2c[:3, :3].T + w2c[:3, 3]
+
+
+def project(points_cam: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
+    """(N, 3) camera-frame points -> (N, 2) image points of intrinsics K (pixel centres at +0.5)."""
+    return points_cam[:, :2] / points_cam[:, 2:3].clamp_min(1e-9) * torch.stack([K[0, 0], K[1, 1]]) + K[:2, 2]
+
+
+def project_to_photo(points: torch.Tensor, gaussians: GaussiansArtifact) -> torch.Tensor:
+    """(N, 3) world points -> (N, 2) image points of the full-resolution photograph."""
+    return project(_to_camera(points, gaussians), torch.as_tensor(gaussians.K, dtype=points.dtype,
+                                                                  device=points.device))
+
+
+def visibility(surface: splat.Render, means: torch.Tensor, covariances: torch.Tensor,
+               camera: splat.Camera) -> torch.Tensor:
+    """(G,) in [0, 1]: how visible each Gaussian is in a render of them, by a soft depth test.
+
+    A Gaussian is seen when it lies on the surface the render shows at its pixel: its distance
+    to the camera at most a tolerance (twice its own largest standard deviation plus 1 % of the
+    distance) behind the rendered distance there (depth / alpha, Eq. 2). Gaussians of the back or
+    the interior fall far behind and get ~0. (A ratio of blending weight to footprint cannot tell
+    these apart: on a dense surface neighbours occlude each other too.) What leaks through a
+    surface only pulls the rendered distance deeper, towards calling more of that surface seen.
+
+    Args:
+        surface: the render of these Gaussians from ``camera``.
+        means: (G, 3) world positions; covariances: (G, 3, 3), as rendered.
+    """
+    w2c = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
+    K = torch.as_tensor(camera.K, dtype=means.dtype, device=means.device)
+    in_camera = means @ w2c[:3, :3].T + w2c[:3, 3]
+    uv = project(in_camera, K)
+    col = uv[:, 0].floor().long().clamp(0, camera.width - 1)
+    row = uv[:, 1].floor().long().clamp(0, camera.height - 1)
+    distance = in_camera.norm(dim=1)
+    tolerance = 2 * torch.linalg.eigvalsh(covariances)[:, -1].clamp_min(0).sqrt() + 0.01 * distance
+    rendered = surface.depth / surface.alpha.clamp_min(MIN_ALPHA)
+    behind = (distance - rendered[row, col]).clamp_min(0)
+    in_view = (uv[:, 0] >= 0) & (uv[:, 0] < camera.width) & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
+    shown = in_view & (in_camera[:, 2] > 0) & (surface.alpha[row, col] >= MIN_ALPHA)
+    return torch.where(shown, torch.exp(-(behind / tolerance) ** 2), 0.0)
+
+
+def rest_visibility(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
+                    gaussians: GaussiansArtifact) -> torch.Tensor:
+    """(G,) in [0, 1]: how visible each Gaussian was in the photograph (:func:`visibility`)."""
+    camera = full_camera(gaussians)
+    with torch.no_grad():
+        rest = splat.rasterize(means, opacities, torch.zeros_like(means[:, :1]), camera, covariances=covariances)
+        return visibility(rest, means, covariances, camera)
+
+
+def surface_normals(rest_means: torch.Tensor, neighbours: int = SURFACE_NEIGHBOURS) -> torch.Tensor:
+    """(G, 3) unit normal of the surface at each Gaussian at rest (sign arbitrary): the direction
+    of least spread of its nearest centres. The Gaussians' own shapes do not say it: fitted from
+    one view they lie flat towards the camera, and the ones behind are round."""
+    points = rest_means.detach().cpu().double().numpy()
+    _, nearest = cKDTree(points).query(points, k=min(neighbours, len(points)))
+    patches = points[nearest] - points[nearest].mean(1, keepdims=True)
+    _, vectors = np.linalg.eigh(np.einsum("gki,gkj->gij", patches, patches))
+    return torch.as_tensor(vectors[:, :, 0], device=rest_means.device)
+
+
+def affine_source_maps(rest_means: torch.Tensor, rest_normals: torch.Tensor, means: torch.Tensor, F: torch.Tensor,
+                       gaussians: GaussiansArtifact, K_frame: torch.Tensor) -> torch.Tensor:
+    """(G, 6) per Gaussian, the affine map  uv = b + J p  from image points p of the frame
+    (intrinsics K_frame, the photograph's pose) to image points uv of the full-resolution photograph.
+
+    Each Gaussian stands for a patch of surface: at rest the plane through X_k with normal N_k,
+    now, carried by its motion and deformation, the plane through x_k with normal F^-T N_k. A
+    pixel is lifted onto that plane, taken back to rest (X = X_k + F^-1 (x - x_k)) and projected
+    into the photograph; J is that chain's derivative at the Gaussian's centre, b makes the centre
+    land on X_k's projection. At rest (F = I) every map is exactly the change of resolution, so
+    their blend is too. A surface the photograph never saw (the back) maps onto the point of the
+    photograph in front of it.
+
+    Args:
+        rest_means, means: (G, 3) centres at rest and now, metres, world frame.
+        rest_normals: (G, 3) surface normals at rest (:func:`surface_normals`).
+        F: (G, 3, 3) deformation gradients.
+        K_frame: (3, 3) intrinsics of the frame.
+    Returns:
+        (G, 6) float64: b (2) and J (2 x 2, row-major) in photograph pixels per frame pixel.
+    """
+    f64 = lambda a: torch.as_tensor(a, dtype=torch.float64, device=means.device)  # noqa: E731
+    R = f64(gaussians.world_to_camera)[:3, :3]
+    K_photo, K_frame = f64(gaussians.K), f64(K_frame)
+    F_inverse = torch.linalg.pinv(f64(F))  # a Gaussian crushed flat (rank-deficient F) keeps a finite map
+    centre = _to_camera(f64(means), gaussians)
+    normal = (f64(rest_normals)[:, None, :] @ F_inverse)[:, 0] @ R.T  # F^-T N, as a row
+    facing = (normal * centre).sum(-1)
+    limit = MIN_GRAZING_COS * normal.norm(dim=-1) * centre.norm(dim=-1)
+    facing = torch.where(facing < 0, -1.0, 1.0) * torch.maximum(facing.abs(), limit)
+    # d x / d p on the plane at the centre's pixel: z (I - c n^T / n.c) K^-1 restricted to (u, v)
+    eye = torch.eye(3, dtype=torch.float64, device=means.device)
+    lift = centre[:, 2, None, None] * (eye - centre[:, :, None] * normal[:, None, :] / facing[:, None, None]) \
+        @ torch.linalg.inv(K_frame)[:, :2]
+    to_rest = F_inverse @ R.T @ lift  # (G, 3, 2) world displacement at rest per pixel
+    rest_cam = _to_camera(f64(rest_means), gaussians)
+    z = rest_cam[:, 2].clamp_min(1e-9)
+    zero = torch.zeros_like(z)
+    d_project = torch.stack([torch.stack([K_photo[0, 0] / z, zero, -K_photo[0, 0] * rest_cam[:, 0] / z ** 2], -1),
+                             torch.stack([zero, K_photo[1, 1] / z, -K_photo[1, 1] * rest_cam[:, 1] / z ** 2], -1)], 1)
+    J = d_project @ R @ to_rest
+    b = project(rest_cam, K_photo) - (J @ project(centre, K_frame)[..., None])[..., 0]
+    return torch.cat([b, J.reshape(-1, 4)], 1)
+
+
+def source_points(voted_maps: torch.Tensor, votes: torch.Tensor) -> torch.Tensor:
+    """(h, w, 2) each pixel's source point: the vote-weighted blend of the Gaussians' affine maps
+    applied to it.
+
+    Args:
+        voted_maps: (h, w, 6) sum_k w_k v_k [b_k, J_k] as rendered (w blending weights, v votes).
+        votes: (h, w) sum_k w_k v_k.
+    Returns:
+        Photograph image points; NaN where nothing voted (below MIN_ALPHA).
+    """
+    h, w = votes.shape
+    rows, cols = torch.meshgrid(torch.arange(h, device=votes.device), torch.arange(w, device=votes.device),
+                                indexing="ij")
+    p = torch.stack([cols, rows], -1).to(voted_maps.dtype) + 0.5
+    J = voted_maps[..., 2:].reshape(h, w, 2, 2)
+    uv = (voted_maps[..., :2] + (J @ p[..., None])[..., 0]) / votes.clamp_min(MIN_ALPHA)[..., None]
+    return torch.where((votes >= MIN_ALPHA)[..., None], uv, float("nan"))
+
+
+def source_roughness(source_uv: torch.Tensor) -> torch.Tensor:
+    """(h, w) how far the source map departs from an affine one at each pixel, in its own units.
+
+    Second differences along x and y, where both neighbours have a source: exactly 0 for any
+    affine motion of the surface (translation, rotation, stretch), about a pixel for a smooth
+    bend, and large where the surface tumbled, tore or flowed, so that neighbouring pixels
+    read far-apart places of the photograph.
+    """
+    rough = torch.zeros(source_uv.shape[:2], dtype=source_uv.dtype, device=source_uv.device)
+    for axis in (0, 1):
+        before, after = source_uv.roll(1, axis), source_uv.roll(-1, axis)
+        second = (before + after - 2 * source_uv).square().sum(-1)
+        inside = torch.ones_like(rough, dtype=torch.bool)
+        inside.narrow(axis, 0, 1).fill_(False)
+        inside.narrow(axis, source_uv.shape[axis] - 1, 1).fill_(False)
+        rough += torch.where(inside & second.isfinite(), second, 0.0)
+    return rough.sqrt()
+
+
+def coherence(roughness_px: torch.Tensor) -> torch.Tensor:
+    """1 where the photograph maps smoothly onto the frame, falling to 0 where it does not
+    (roughness in output pixels): sampling a jumbled source map would scatter the photograph's
+    pixels into noise, so the render is trusted there instead."""
+    low, high = SMOOTH_SOURCE_PX
+    trusted = ((high - roughness_px) / (high - low)).clamp(0, 1)[None, None]
+    # Trust changes over regions, not from pixel to pixel (which would speckle the frame with
+    # alternating photo and render): a 3x3 minimum, then a 3x3 mean.
+    regional = torch.nn.functional.avg_pool2d(-torch.nn.functional.max_pool2d(-trusted, 3, 1, 1), 3, 1, 1,
+                                              count_include_pad=False)
+    return regional[0, 0]
