@@ -12,7 +12,7 @@ export PATH := $(CURDIR)/$(BIN):$(PATH)
 $(INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[test,examples,diffusion]"
+	$(BIN)/pip install --quiet -e ".[test,examples,reconstruct,diffusion]"
 	touch $@
 
 demo: $(INSTALLED)

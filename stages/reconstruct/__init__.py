@@ -2,7 +2,7 @@
 
 Pipeline (each step its own module; pipeline.py chains them, cli.py writes gaussians.h5):
   segment    objects' masks: mask files, boxes refined by GrabCut or SAM, image alpha
-  background the photograph with the objects inpainted away (OpenCV)
+  background the photograph with the objects inpainted away (PatchMatch exemplar fill)
   depth      a metric depth prior: silhouette inflation, or a DPT/MiDaS model
   lift       initial Gaussians: the front surface lifted, the back closed, the rim walled
   ply        or initial Gaussians from another tool's 3DGS PLY, placed into the input camera

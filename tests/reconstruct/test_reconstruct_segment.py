@@ -53,3 +53,23 @@ def test_background_inpaints_the_object_away(capsule_photo):
     background = inpaint_background(capsule_photo.rgb, capsule_photo.mask.astype(np.uint8))
     backdrop = capsule_photo.rgb[0, 0].astype(int)  # the synthetic backdrop is one flat grey
     assert np.abs(background.astype(int) - backdrop).max() <= 4
+
+
+@pytest.mark.parametrize("texture", ["stripes", "checkerboard", "weave"])
+def test_background_continues_the_texture_around_the_hole(texture):
+    """A periodic backdrop behind a disc: the fill must be the backdrop itself (it is all around
+    the hole to copy from); diffusion-style filling (Telea) smears it to its mean."""
+    rows, cols = np.mgrid[0:96, 0:128].astype(np.float64)
+    value = {"stripes": 128 + 90 * np.sin(2 * np.pi * (cols + rows) / 8),
+             "checkerboard": 128 + 90 * np.sign(np.sin(np.pi * (cols + 0.5) / 5) * np.sin(np.pi * (rows + 0.5) / 5)),
+             "weave": 128 + 50 * np.sin(2 * np.pi * cols / 7) + 40 * np.cos(2 * np.pi * rows / 11)}[texture]
+    backdrop = np.repeat(value[..., None], 3, axis=2).clip(0, 255).astype(np.uint8)
+    disc = (cols - 64) ** 2 + (rows - 48) ** 2 < 20 ** 2
+    photo = backdrop.copy()
+    photo[disc] = (255, 0, 0)
+    background = inpaint_background(photo, disc.astype(np.uint8))
+    hole = (cols - 64) ** 2 + (rows - 48) ** 2 < 24 ** 2  # the disc and its dilation (3 px here) with margin
+    assert (background[~hole] == photo[~hole]).all()
+    assert np.abs(background[hole].astype(float) - backdrop[hole]).mean() < 2.0
+    telea = cv2.inpaint(photo, cv2.dilate(disc.astype(np.uint8), np.ones((7, 7), np.uint8)), 5, cv2.INPAINT_TELEA)
+    assert np.abs(telea[hole].astype(float) - backdrop[hole]).mean() > 20.0
