@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from schemas import InputError
-from stages.reconstruct.background import inpaint_background
+from stages.reconstruct.background import SEAM_WIDTH, dilation_px, inpaint_background
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
 from stages.reconstruct.segment import ObjectSpec, segment_objects
@@ -57,19 +57,27 @@ def test_background_inpaints_the_object_away(capsule_photo):
 
 @pytest.mark.parametrize("texture", ["stripes", "checkerboard", "weave"])
 def test_background_continues_the_texture_around_the_hole(texture):
-    """A periodic backdrop behind a disc: the fill must be the backdrop itself (it is all around
-    the hole to copy from); diffusion-style filling (Telea) smears it to its mean."""
+    """A periodic backdrop behind a disc: past the seam, where the fill is by exemplar, it must
+    be the backdrop itself (it is all around the hole to copy from); diffusion (Telea) smears it
+    to its mean there."""
     rows, cols = np.mgrid[0:96, 0:128].astype(np.float64)
     value = {"stripes": 128 + 90 * np.sin(2 * np.pi * (cols + rows) / 8),
              "checkerboard": 128 + 90 * np.sign(np.sin(np.pi * (cols + 0.5) / 5) * np.sin(np.pi * (rows + 0.5) / 5)),
              "weave": 128 + 50 * np.sin(2 * np.pi * cols / 7) + 40 * np.cos(2 * np.pi * rows / 11)}[texture]
     backdrop = np.repeat(value[..., None], 3, axis=2).clip(0, 255).astype(np.uint8)
-    disc = (cols - 64) ** 2 + (rows - 48) ** 2 < 20 ** 2
+    distance = np.hypot(cols - 64, rows - 48)
+    disc = distance < 20
     photo = backdrop.copy()
     photo[disc] = (255, 0, 0)
     background = inpaint_background(photo, disc.astype(np.uint8))
-    hole = (cols - 64) ** 2 + (rows - 48) ** 2 < 24 ** 2  # the disc and its dilation (3 px here) with margin
+    radius = dilation_px(96, 128)
+    hole = distance < 20 + radius + 1
     assert (background[~hole] == photo[~hole]).all()
-    assert np.abs(background[hole].astype(float) - backdrop[hole]).mean() < 2.0
+    past_seam = distance < 20 + radius - SEAM_WIDTH * radius - 1
+    assert np.abs(background[past_seam].astype(float) - backdrop[past_seam]).mean() < 2.0
     telea = cv2.inpaint(photo, cv2.dilate(disc.astype(np.uint8), np.ones((7, 7), np.uint8)), 5, cv2.INPAINT_TELEA)
-    assert np.abs(telea[hole].astype(float) - backdrop[hole]).mean() > 20.0
+    assert np.abs(telea[past_seam].astype(float) - backdrop[past_seam]).mean() > 20.0
+    # and along the seam it continues the rim: no worse than diffusion alone
+    seam = hole & ~past_seam
+    assert np.abs(background[seam].astype(float) - backdrop[seam]).mean() <= \
+        np.abs(telea[seam].astype(float) - backdrop[seam]).mean() + 1.0
