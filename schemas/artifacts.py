@@ -140,7 +140,7 @@ class CoarseArtifact(Artifact):
     """coarse.h5, written by pm-render. T frames of h x w pixels."""
 
     SCHEMA: ClassVar[str] = "physmotion.coarse"
-    VERSION: ClassVar[int] = 2
+    VERSION: ClassVar[int] = 3
 
     rgb: Annotated[Array, _f("/frames/rgb", "u1", "T,h,w,3", frames=True, gzip=True)]
     alpha: Annotated[Array, _f("/frames/alpha", "f4", "T,h,w", frames=True, gzip=True)]
@@ -148,6 +148,7 @@ class CoarseArtifact(Artifact):
     source_uv: Annotated[Array, _f("/frames/source_uv", "f4", "T,h,w,2", frames=True, gzip=True)]
     source_coherence: Annotated[Array, _f("/frames/source_coherence", "f4", "T,h,w", frames=True, gzip=True)]
     source_confidence: Annotated[Array, _f("/frames/source_confidence", "f4", "T,h,w", frames=True, gzip=True)]
+    normal: Annotated[Array, _f("/frames/normal", "f4", "T,h,w,3", frames=True, gzip=True)]
     K: Annotated[Array, _f("/camera/K", "f8", "3,3")]
     width: Annotated[int, _f("/camera@width")]
     height: Annotated[int, _f("/camera@height")]

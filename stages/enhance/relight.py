@@ -3,7 +3,7 @@
 The photograph's colour at a surface point is albedo x shading, and the shading
 belongs to the point's orientation at rest, not to the point: a ball that rolls
 over carries its dark underside into the light. We fit one distant light to the
-photograph on the reconstruction's normals (first-order spherical harmonics:
+photograph on the rendered normals of frame 0 (first-order spherical harmonics:
 brightness = ambient + light . n) and scale each pixel's colour, in linear
 light, by shading(normal now) / shading(normal where it was in the photograph).
 When one light does not explain the photograph's brightness (a flat graphic, a
@@ -20,7 +20,6 @@ import cv2
 import numpy as np
 
 from schemas.artifacts import CoarseArtifact
-from stages.reconstruct.geometry import pixel_rays
 
 from .compositing import normalised_blur, sample_at
 
@@ -30,10 +29,11 @@ MIN_EXPLAINED = 0.5
 """The light is used only if it explains at least this fraction (R^2) of the brightness variance
 inside the objects. Measured: ball 0.89, coffee 0.27, logo 0.27 (benchmarks/RESULTS.md)."""
 NORMAL_SMOOTHING = 0.03
-"""Blur of the rendered surface (standard deviation) per object size (square root of its pixel
-count): shading is smooth, while the Gaussians' own relief and the depth's jitter are not."""
+"""Blur of the rendered normals (standard deviation) per object size (square root of its pixel
+count): shading is smooth, while the Gaussians' own relief is not."""
 RIM_PX = 3
-"""Pixels along the silhouette, whose blended depth gives no normal, are left out of the fit."""
+"""Pixels along the silhouette, whose colour in the photograph mixes in the background, are left
+out of the fit."""
 FLOOR = 0.15
 """Shading is never taken below this fraction of its brightest (ambient + |light|): near the
 terminator the photograph holds little but noise and a small error in the normal moves the
@@ -55,43 +55,17 @@ def to_srgb(linear: np.ndarray) -> np.ndarray:
     return 255.0 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
-def surface_normals(depth: np.ndarray, alpha: np.ndarray, K: np.ndarray, sigma_px: float) -> np.ndarray:
-    """Camera-space unit normals (h, w, 3) of a rendered surface, facing the camera; NaN off it.
+def smooth_normals(normals: np.ndarray, alpha: np.ndarray, sigma_px: float) -> np.ndarray:
+    """(h, w, 3) a frame's rendered normals (coarse.h5 /frames/normal) blurred over the surface
+    (alpha > 0.5) and renormalised; NaN off it.
 
-    Args:
-        depth: (h, w) alpha-weighted distance to the camera centre, m (splat's depth).
-        alpha: (h, w) coverage; the surface is where it exceeds 0.5.
-        K: (3, 3) intrinsics of the render.
-        sigma_px: the normals are blurred by this much (a normalised blur over the surface's own
-            pixels, so the background does not bend the rim).
+    The blur is normalised over the surface's own pixels, so the background does not bend the rim:
+    shading is smooth, while the Gaussians' own relief is not.
     """
-    h, w = alpha.shape
-    on = alpha > 0.5
-    rays = pixel_rays(K, h, w)
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    points = rays * (depth / np.maximum(alpha, 1e-6))[..., None]
-    normals = np.cross(_surface_difference(points, on, axis=1), _surface_difference(points, on, axis=0))
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
-    normals *= -np.sign(np.sum(normals * rays, axis=-1, keepdims=True))  # towards the camera
-    normals, weight = normalised_blur(normals, on & np.isfinite(normals).all(-1), sigma_px)
-    normals /= np.linalg.norm(normals, axis=-1, keepdims=True) + 1e-12
-    return np.where(on[..., None] & (weight[..., None] > 0.01), normals, np.nan).astype(np.float32)
-
-
-def _surface_difference(points: np.ndarray, on: np.ndarray, axis: int) -> np.ndarray:
-    """(h, w, 3) change of ``points`` per pixel along ``axis``, from neighbours on the surface only:
-    central where both are, one-sided at the rim, NaN where neither is."""
-    p_ahead, on_ahead = np.roll(points, -1, axis=axis), np.roll(on, -1, axis=axis)
-    p_behind, on_behind = np.roll(points, 1, axis=axis), np.roll(on, 1, axis=axis)
-    edge = [slice(None)] * 2
-    edge[axis] = -1
-    on_ahead[tuple(edge)] = False  # np.roll wraps around the border
-    edge[axis] = 0
-    on_behind[tuple(edge)] = False
-    on_ahead, on_behind = (on & on_ahead)[..., None], (on & on_behind)[..., None]
-    central = (p_ahead - p_behind) / 2
-    return np.where(on_ahead & on_behind, central,
-                    np.where(on_ahead, p_ahead - points, np.where(on_behind, points - p_behind, np.nan)))
+    on = (alpha > 0.5) & np.isfinite(normals).all(-1)
+    blurred, weight = normalised_blur(np.nan_to_num(normals), on, sigma_px)
+    blurred /= np.linalg.norm(blurred, axis=-1, keepdims=True) + 1e-12
+    return np.where(on[..., None] & (weight[..., None] > 0.01), blurred, np.nan).astype(np.float32)
 
 
 @dataclass(frozen=True)
@@ -138,14 +112,14 @@ class Relighting:
         """Fit on frame 0 (the reconstruction at rest, seen as in the photograph).
 
         Args:
-            coarse: the render; frame 0's depth gives the photograph's normals.
+            coarse: the render; frame 0's normals are the photograph's.
             photo: (h, w, 3) the photograph at the render's size, sRGB in [0, 255].
         """
         on = coarse.alpha[0] > 0.5
         if on.sum() < 50:
             return None
         sigma = max(1.0, NORMAL_SMOOTHING * float(np.sqrt(on.sum())))
-        normals = surface_normals(coarse.depth[0], coarse.alpha[0], coarse.K, sigma)
+        normals = smooth_normals(coarse.normal[0], coarse.alpha[0], sigma)
         inner = cv2.erode(on.astype(np.uint8), np.ones((2 * RIM_PX + 1,) * 2, np.uint8)) > 0
         shading, explained = fit_shading(to_linear(photo.astype(np.float64)).max(axis=-1), normals, inner)
         if explained < MIN_EXPLAINED:
@@ -163,7 +137,7 @@ class Relighting:
         Args:
             uv: (h, w, 2) frame t's source points at output resolution (flow.smooth_source).
         """
-        now = surface_normals(self.coarse.depth[t], self.coarse.alpha[t], self.coarse.K, self.sigma_px)
+        now = smooth_normals(self.coarse.normal[t], self.coarse.alpha[t], self.sigma_px)
         then = sample_at(np.nan_to_num(self.rest_normals), uv)
         then /= np.linalg.norm(then, axis=-1, keepdims=True) + 1e-12
         ratio = np.clip(self.shading(now) / self.shading(then), 1.0 / MAX_GAIN, MAX_GAIN)

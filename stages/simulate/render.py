@@ -2,14 +2,15 @@
 
 Each Gaussian k at frame t sits at x_k(t) with covariance F_k H_k F_k^T (H_k its
 rest covariance, F_k the deformation gradient from the simulation). Beside the
-colour we render, as extra feature channels in the same pass, each Gaussian's
-affine map back into the photograph at rest and its visibility there
-(source_map.py). Their blend gives ``source_uv`` (where each pixel's surface was
-in the photograph; for a surface the photograph never saw, the point of the
-photograph in front of it, whose colour the reconstruction gave it),
-``source_coherence`` (how smoothly the photograph maps onto the frame there) and
-``source_confidence`` (how visible the surface was at rest, times the
-coherence): the flow enhancement reads the photograph through them.
+colour we render, in a second pass voted by what the frame itself shows, each
+Gaussian's affine map back into the photograph at rest, its surface normal now
+and its visibility at rest (source_map.py). Their blend gives ``source_uv``
+(where each pixel's surface was in the photograph; for a surface the photograph
+never saw, the point of the photograph in front of it, whose colour the
+reconstruction gave it), ``source_coherence`` (how smoothly the photograph maps
+onto the frame there), ``source_confidence`` (how visible the surface was at
+rest, times the coherence) and ``normal``: the flow enhancement reads the
+photograph through them and re-shades it.
 """
 from __future__ import annotations
 
@@ -21,8 +22,8 @@ import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
-from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, affine_source_maps, coherence, rest_visibility,
-                         source_points, source_roughness, surface_normals, visibility)
+from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, affine_source_maps, coherence, facing_normals,
+                         rest_visibility, source_points, source_roughness, surface_normals, visibility)
 
 log = logging.getLogger("physmotion.render")
 
@@ -47,13 +48,14 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
     rest_means, opacities, colors = t(gaussians.means), t(gaussians.opacities), t(gaussians.colors)
     rest_cov = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
     rest_seen = rest_visibility(rest_means, rest_cov, opacities, gaussians)
-    normals = surface_normals(rest_means)
+    rest_normals = surface_normals(rest_means)
+    w2c = t(gaussians.world_to_camera)
     log.info("%d Gaussians, %.0f%% visible in the photograph; rendering %d frames at %dx%d",
              G, 100 * float((rest_seen > 0.5).float().mean()), trajectories.positions.shape[0],
              camera.width, camera.height)
 
     T = trajectories.positions.shape[0]
-    out = {k: [] for k in ("rgb", "alpha", "depth", "source_uv", "source_coherence", "source_confidence")}
+    out = {k: [] for k in ("rgb", "alpha", "depth", "source_uv", "source_coherence", "source_confidence", "normal")}
     with torch.no_grad():
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame, :G])
@@ -64,12 +66,15 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             # Only the surface in front decides a pixel's source: what leaks through it from behind
             # (the far side, which maps to elsewhere in the photograph) would scatter the map.
             votes = visibility(render, means, covariances, camera).clamp_min(MIN_VOTE)[:, None]
-            maps = affine_source_maps(rest_means, normals, means, F, gaussians, camera.K).to(votes.dtype)
-            voting = votes * torch.cat([maps, rest_seen[:, None], torch.ones_like(votes)], 1)
+            normals = facing_normals(rest_normals, means, F, w2c)
+            maps = affine_source_maps(rest_means, means, normals, F, gaussians, camera.K).to(votes.dtype)
+            voting = votes * torch.cat([maps, normals, rest_seen[:, None], torch.ones_like(votes)], 1)
             front = splat.rasterize(means, opacities, voting, camera, covariances=covariances).features
-            voted = front[..., -1]
-            source_uv = torch.where(covered[..., None], source_points(front[..., :AFFINE_CHANNELS], voted), torch.nan)
-            seen_fraction = (front[..., AFFINE_CHANNELS] / voted.clamp_min(MIN_ALPHA)).clamp(0, 1)
+            front, normal, seen, voted = front.split([AFFINE_CHANNELS, 3, 1, 1], -1)
+            voted = voted[..., 0].clamp_min(MIN_ALPHA)
+            source_uv = torch.where(covered[..., None], source_points(front, voted), torch.nan)
+            normal = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+            seen_fraction = (seen[..., 0] / voted).clamp(0, 1)
             smooth = torch.where(covered, coherence(source_roughness(source_uv) * scale), 0.0)
             out["rgb"].append((render.features.clamp(0, 1) * 255 + 0.5).to(torch.uint8))
             out["alpha"].append(alpha)
@@ -77,6 +82,7 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             out["source_uv"].append(source_uv)
             out["source_coherence"].append(smooth)
             out["source_confidence"].append(torch.where(covered, seen_fraction * smooth, 0.0))
+            out["normal"].append(torch.where(covered[..., None], normal, torch.nan))
             surface = alpha > 0.5
             share = lambda x: 100 * float(x[surface].gt(0.5).float().mean()) if surface.any() else 0.0  # noqa: E731
             log.info("frame %d/%d rendered; of the surface %.0f%% maps smoothly from the photograph, %.0f%% was "

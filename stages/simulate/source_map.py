@@ -105,13 +105,14 @@ def surface_normals(rest_means: torch.Tensor, neighbours: int = SURFACE_NEIGHBOU
     return torch.as_tensor(vectors[:, :, 0], device=rest_means.device)
 
 
-def affine_source_maps(rest_means: torch.Tensor, rest_normals: torch.Tensor, means: torch.Tensor, F: torch.Tensor,
+def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: torch.Tensor, F: torch.Tensor,
                        gaussians: GaussiansArtifact, K_frame: torch.Tensor) -> torch.Tensor:
     """(G, 6) per Gaussian, the affine map  uv = b + J p  from image points p of the frame
     (intrinsics K_frame, the photograph's pose) to image points uv of the full-resolution photograph.
 
     Each Gaussian stands for a patch of surface: at rest the plane through X_k with normal N_k,
-    now, carried by its motion and deformation, the plane through x_k with normal F^-T N_k. A
+    now, carried by its motion and deformation, the plane through x_k with normal F^-T N_k
+    (:func:`facing_normals`). A
     pixel is lifted onto that plane, taken back to rest (X = X_k + F^-1 (x - x_k)) and projected
     into the photograph; J is that chain's derivative at the Gaussian's centre, b makes the centre
     land on X_k's projection. At rest (F = I) every map is exactly the change of resolution, so
@@ -120,7 +121,7 @@ def affine_source_maps(rest_means: torch.Tensor, rest_normals: torch.Tensor, mea
 
     Args:
         rest_means, means: (G, 3) centres at rest and now, metres, world frame.
-        rest_normals: (G, 3) surface normals at rest (:func:`surface_normals`).
+        normals: (G, 3) surface normals now, camera frame (:func:`facing_normals`).
         F: (G, 3, 3) deformation gradients.
         K_frame: (3, 3) intrinsics of the frame.
     Returns:
@@ -130,8 +131,7 @@ def affine_source_maps(rest_means: torch.Tensor, rest_normals: torch.Tensor, mea
     R = f64(gaussians.world_to_camera)[:3, :3]
     K_photo, K_frame = f64(gaussians.K), f64(K_frame)
     F_inverse = torch.linalg.pinv(f64(F))  # a Gaussian crushed flat (rank-deficient F) keeps a finite map
-    centre = _to_camera(f64(means), gaussians)
-    normal = (f64(rest_normals)[:, None, :] @ F_inverse)[:, 0] @ R.T  # F^-T N, as a row
+    centre, normal = _to_camera(f64(means), gaussians), f64(normals)
     facing = (normal * centre).sum(-1)
     limit = MIN_GRAZING_COS * normal.norm(dim=-1) * centre.norm(dim=-1)
     facing = torch.where(facing < 0, -1.0, 1.0) * torch.maximum(facing.abs(), limit)
@@ -148,6 +148,24 @@ def affine_source_maps(rest_means: torch.Tensor, rest_normals: torch.Tensor, mea
     J = d_project @ R @ to_rest
     b = project(rest_cam, K_photo) - (J @ project(centre, K_frame)[..., None])[..., 0]
     return torch.cat([b, J.reshape(-1, 4)], 1)
+
+
+def facing_normals(rest_normals: torch.Tensor, means: torch.Tensor, F: torch.Tensor,
+                   world_to_camera: torch.Tensor) -> torch.Tensor:
+    """(G, 3) unit normals of the surface at each Gaussian now, camera frame, turned towards the
+    camera: the rest normals carried by the deformation (F^-T N). Any surface the camera sees
+    faces it, so the side the normal points to needs no bookkeeping from rest.
+
+    Args:
+        rest_normals: (G, 3) world frame (:func:`surface_normals`); means: (G, 3) centres now;
+        F: (G, 3, 3) deformation gradients; world_to_camera: (4, 4).
+    """
+    R, T = world_to_camera[:3, :3].to(means.dtype), world_to_camera[:3, 3].to(means.dtype)
+    # pinv: a Gaussian crushed flat (rank-deficient F) keeps a finite normal
+    normals = (rest_normals.to(means.dtype)[:, None, :] @ torch.linalg.pinv(F.to(means.dtype)))[:, 0] @ R.T
+    normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    towards_camera = ((means @ R.T + T) * normals).sum(-1) < 0
+    return torch.where(towards_camera[:, None], normals, -normals)
 
 
 def source_points(voted_maps: torch.Tensor, votes: torch.Tensor) -> torch.Tensor:

@@ -39,7 +39,7 @@ def random_coarse(T=2, h=4, w=6, seed=2) -> CoarseArtifact:
     r = np.random.default_rng(seed)
     return CoarseArtifact(rgb=r.integers(0, 255, (T, h, w, 3)), alpha=r.random((T, h, w)), depth=r.random((T, h, w)),
                           source_uv=r.random((T, h, w, 2)), source_coherence=r.random((T, h, w)),
-                          source_confidence=r.random((T, h, w)), K=np.eye(3),
+                          source_confidence=r.random((T, h, w)), normal=r.random((T, h, w, 3)), K=np.eye(3),
                           width=w, height=h, fps=24.0)
 
 
@@ -131,7 +131,7 @@ from schemas.artifacts import write_artifact, CoarseArtifact
 T = 400  # large enough that the write takes a while
 a = CoarseArtifact(rgb=np.random.default_rng(0).integers(0, 255, (T, 256, 256, 3)), alpha=np.zeros((T, 256, 256)),
     depth=np.zeros((T, 256, 256)), source_uv=np.zeros((T, 256, 256, 2)), source_coherence=np.zeros((T, 256, 256)),
-    source_confidence=np.zeros((T, 256, 256)),
+    source_confidence=np.zeros((T, 256, 256)), normal=np.zeros((T, 256, 256, 3)),
     K=np.eye(3), width=256, height=256, fps=24.0)
 print("writing", flush=True)
 write_artifact(sys.argv[1], a, created_by="t", config_hash="h")

@@ -75,6 +75,7 @@ def write_inputs(folder: Path, enhance: dict) -> dict:
                             source_uv=np.zeros((FRAMES, SIZE, SIZE, 2), np.float32),
                             source_coherence=np.zeros((FRAMES, SIZE, SIZE), np.float32),
                             source_confidence=np.zeros((FRAMES, SIZE, SIZE), np.float32),
+                            normal=np.zeros((FRAMES, SIZE, SIZE, 3), np.float32),
                             K=np.eye(3), width=SIZE, height=SIZE, fps=8.0)
     paths = {"scene": folder / "scene.yaml", "gaussians": folder / "gaussians.h5", "coarse": folder / "coarse.h5"}
     write_artifact(paths["gaussians"], gaussians, created_by="test", config_hash="0")
