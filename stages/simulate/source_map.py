@@ -112,10 +112,9 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
 
     Each Gaussian stands for a patch of surface: at rest the plane through X_k with normal N_k,
     now, carried by its motion and deformation, the plane through x_k with normal F^-T N_k
-    (:func:`facing_normals`). A
-    pixel is lifted onto that plane, taken back to rest (X = X_k + F^-1 (x - x_k)) and projected
-    into the photograph; J is that chain's derivative at the Gaussian's centre, b makes the centre
-    land on X_k's projection. At rest (F = I) every map is exactly the change of resolution, so
+    (:func:`facing_normals`). A pixel is lifted onto that plane, taken back to rest
+    (X = X_k + F^-1 (x - x_k)) and projected into the photograph; J is that chain's derivative at
+    the Gaussian's centre, b makes the centre land on X_k's projection. At rest (F = I) every map is exactly the change of resolution, so
     their blend is too. A surface the photograph never saw (the back) maps onto the point of the
     photograph in front of it.
 
