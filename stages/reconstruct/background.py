@@ -13,9 +13,13 @@ cross-fades from diffusion at the seam to exemplar past twice the dilation.
 """
 from __future__ import annotations
 
+import logging
+
 import cv2
 import numpy as np
 from patchmatch_cython import inpaint_pyramid
+
+log = logging.getLogger("physmotion.reconstruct.background")
 
 PATCH_PX = 7
 """Side of the patches that are matched and copied, pixels. Measured on periodic test textures
@@ -45,8 +49,13 @@ def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
     hole = cv2.dilate((labels > 0).astype(np.uint8), kernel)
     if not hole.any():
         return photo.copy()
-    texture = inpaint_pyramid(photo, hole > 0, patch_size=PATCH_PX, seed=0, poisson_blend=False)
     rim = cv2.inpaint(photo, hole, DIFFUSION_RADIUS_PX, cv2.INPAINT_TELEA)
+    try:
+        texture = inpaint_pyramid(photo, hole > 0, patch_size=PATCH_PX, seed=0, poisson_blend=False)
+    except ValueError as error:  # no whole patch of background left at some level of the pyramid
+        log.warning("background: %s; the objects cover too much of the photograph to copy patches from, "
+                    "so their place is filled by diffusion alone", error)
+        return np.where(hole[..., None] > 0, rim, photo)
     inside_px = cv2.distanceTransform(hole, cv2.DIST_L2, 5)  # from the nearest known pixel
     diffused = np.clip(1 - (inside_px - 0.5) / (SEAM_WIDTH * radius), 0, 1)[..., None]
     filled = diffused * rim + (1 - diffused) * texture

@@ -81,3 +81,13 @@ def test_background_continues_the_texture_around_the_hole(texture):
     seam = hole & ~past_seam
     assert np.abs(background[seam].astype(float) - backdrop[seam]).mean() <= \
         np.abs(telea[seam].astype(float) - backdrop[seam]).mean() + 1.0
+
+
+def test_background_of_an_object_filling_the_photograph(capsule_photo, caplog):
+    """Too little background to copy patches from: the hole is still filled (by diffusion), the
+    rest kept, and the log says why."""
+    labels = np.ones((96, 128), np.uint8)
+    labels[:, :4] = 0
+    background = inpaint_background(capsule_photo.rgb, labels)
+    assert background.shape == capsule_photo.rgb.shape and background.dtype == np.uint8
+    assert "diffusion alone" in caplog.text
