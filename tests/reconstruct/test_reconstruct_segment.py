@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from schemas import InputError
-from stages.reconstruct.background import SEAM_WIDTH, dilation_px, inpaint_background
+from stages.reconstruct.background import EXEMPLAR_MAX_PX, SEAM_WIDTH, dilation_px, inpaint_background
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
 from stages.reconstruct.segment import ObjectSpec, segment_objects
@@ -91,3 +91,23 @@ def test_background_of_an_object_filling_the_photograph(capsule_photo, caplog):
     background = inpaint_background(capsule_photo.rgb, labels)
     assert background.shape == capsule_photo.rgb.shape and background.dtype == np.uint8
     assert "diffusion alone" in caplog.text
+
+
+def test_background_of_a_photograph_wider_than_the_exemplar_cap():
+    """Past EXEMPLAR_MAX_PX the exemplar fill is computed on a shrunk copy and brought back: the
+    texture still continues into the hole (up to the resampling), the known pixels stay exact."""
+    width = EXEMPLAR_MAX_PX + 200
+    rows, cols = np.mgrid[0:64, 0:width].astype(np.float64)
+    backdrop = np.repeat((128 + 80 * np.sin(2 * np.pi * (cols + rows) / 16))[..., None], 3, axis=2).astype(np.uint8)
+    distance = np.hypot(cols - width / 2, rows - 32)
+    disc = distance < 20
+    photo = backdrop.copy()
+    photo[disc] = (255, 0, 0)
+    background = inpaint_background(photo, disc.astype(np.uint8))
+    radius = dilation_px(64, width)
+    hole = distance < 20 + radius + 1
+    assert (background[~hole] == photo[~hole]).all()
+    past_seam = distance < 20 + radius - SEAM_WIDTH * radius - 1
+    telea = cv2.inpaint(photo, hole.astype(np.uint8), 5, cv2.INPAINT_TELEA)
+    error = np.abs(background[past_seam].astype(float) - backdrop[past_seam]).mean()
+    assert error < 10.0 and np.abs(telea[past_seam].astype(float) - backdrop[past_seam]).mean() > 2 * error
