@@ -42,14 +42,13 @@ def exemplar_fill(photo: np.ndarray, hole: np.ndarray) -> np.ndarray:
     """(H, W, 3) u8: ``photo`` with the ``hole`` (H, W bool) filled by copied patches, computed at
     most EXEMPLAR_MAX_PX on the long side and brought back to the photograph's size."""
     height, width = hole.shape
-    shrink = EXEMPLAR_MAX_PX / max(height, width)
-    if shrink >= 1:
-        return inpaint_pyramid(photo, hole, patch_size=PATCH_PX, seed=0, poisson_blend=False)
-    size = (round(width * shrink), round(height * shrink))
-    small_hole = cv2.resize(hole.astype(np.uint8), size, interpolation=cv2.INTER_AREA) > 0
-    small = inpaint_pyramid(cv2.resize(photo, size, interpolation=cv2.INTER_AREA), small_hole, patch_size=PATCH_PX,
-                            seed=0, poisson_blend=False)
-    return cv2.resize(small, (width, height), interpolation=cv2.INTER_CUBIC)
+    size = (width, height)
+    if max(size) > EXEMPLAR_MAX_PX:
+        size = tuple(round(side * EXEMPLAR_MAX_PX / max(width, height)) for side in size)
+        photo = cv2.resize(photo, size, interpolation=cv2.INTER_AREA)
+        hole = cv2.resize(hole.astype(np.uint8), size, interpolation=cv2.INTER_AREA) > 0
+    filled = inpaint_pyramid(photo, hole, patch_size=PATCH_PX, seed=0, poisson_blend=False)
+    return cv2.resize(filled, (width, height), interpolation=cv2.INTER_CUBIC) if size != (width, height) else filled
 
 
 def dilation_px(height: int, width: int) -> int:
