@@ -16,9 +16,10 @@ log = logging.getLogger("physmotion.render")
 DESCRIPTION = """\
 Render every simulated frame through the splat rasterizer from the input camera: Gaussian k
 at x_k(t) with covariance F_k H_k F_k^T. Writes coarse.h5 (rgb over black, alpha, depth,
-source_uv = where each surface was in the photograph at rest, source_confidence = how visible
-it was there) and an H.264 preview of the rgb frames. Width from the scene's render.width,
-capped at the photograph's and rounded to even sizes."""
+source_uv = where each surface was in the photograph at rest, source_coherence = how smoothly
+the photograph maps there, source_confidence = how visible that surface was in it, times the
+coherence, normal = the surface's normal now) and an H.264 preview of the rgb frames. Width
+from the scene's render.width, capped at the photograph's and rounded to even sizes."""
 
 
 def build_parser() -> argparse.ArgumentParser:
