@@ -27,7 +27,7 @@ log = logging.getLogger("physmotion.enhance.relight")
 
 MIN_EXPLAINED = 0.5
 """The light is used only if it explains at least this fraction (R^2) of the brightness variance
-inside the objects. Measured: ball 0.89, coffee 0.27, logo 0.27 (benchmarks/RESULTS.md)."""
+inside the objects. Measured: ball 0.89, coffee 0.25, logo 0.22 (benchmarks/RESULTS.md)."""
 NORMAL_SMOOTHING = 0.03
 """Blur of the rendered normals (standard deviation) per object size (square root of its pixel
 count): shading is smooth, while the Gaussians' own relief is not."""
