@@ -235,3 +235,22 @@ def test_turned_sphere_reads_the_photograph_where_its_surface_was():
         cosine = np.sum(coarse.normal[frame][region] * normals[region], -1)
         degrees = np.degrees(np.arccos(np.clip(cosine, -1, 1)))
         assert np.median(degrees) < 3.0 and degrees.max() < 5.0
+
+
+def test_ring_around_the_object_shows_the_photograph_until_the_object_moves():
+    """The background is filled over the mask and a ring around it (here 60 grey, where the photograph
+    shows 128): at rest the ring must show the photograph, as it did; once the object has moved away
+    from it, the fill (no outline of the object left behind)."""
+    gaussians = disc_gaussians()
+    photo, disc = textured_photo()
+    ring = (cv2.dilate(disc.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0) & ~disc
+    gaussians.background = np.where((disc | ring)[..., None], 60, photo).astype(np.uint8)
+    shifts = [0, 7]
+    coarse = render_video(gaussians, translated(gaussians, shifts), width=W, device="cpu")
+    frames = enhance_frames(coarse, gaussians, threshold=0.5)
+    at_rest = ring & (coarse.alpha[0] < 0.05)
+    assert at_rest.sum() > 20
+    assert np.abs(frames[0][at_rest].astype(int) - 128).max() <= 2
+    left_behind = ring & (coarse.alpha[1] < 0.05) & (np.arange(W) < 20)  # the side the disc moved away from
+    assert left_behind.sum() > 10
+    assert np.abs(frames[1][left_behind].astype(int) - 60).max() <= 2
