@@ -84,9 +84,8 @@ STILL_PX = 0.5
 fade out of the background: one pixel of motion leaves e^-4 of them."""
 
 
-def background_beside(photo: np.ndarray, fill: np.ndarray, outside: np.ndarray, alpha: np.ndarray,
-                      alpha_rest: np.ndarray, moved_px: np.ndarray, reach_px: float) -> np.ndarray:
-    """One frame's background: the photograph beside the object where it still stands as at rest,
+class Backdrop:
+    """Each frame's background: the photograph beside the object where it still stands as at rest,
     the inpainted fill where it moved or left.
 
     The fill covers the objects' masks and a ring around them, since the photograph's pixels just
@@ -97,28 +96,33 @@ def background_beside(photo: np.ndarray, fill: np.ndarray, outside: np.ndarray, 
     error on the example and unseen scenes).
 
     Args:
-        photo, fill: (h, w, 3) the photograph and the inpainted background, output resolution.
-        outside: (h, w) in [0, 1], how far each pixel is outside the objects' masks.
-        alpha, alpha_rest: (h, w) the frame's rendered alpha and frame 0's.
-        moved_px: (h, w) how far each object pixel's surface is from where it was in the
-            photograph (|source point - pixel|, output pixels); NaN off the object.
-        reach_px: the ring's width, output pixels.
-    Returns:
-        (h, w, 3) float32 in [0, 255].
+        photo, fill: (h, w, 3) the photograph and the inpainted background at output resolution.
+        mask: (H, W) the objects' mask at the photograph's resolution (> 0 on an object).
+        alpha_rest: (h, w) the rendered alpha of frame 0.
     """
-    still = np.where(np.isfinite(moved_px), np.exp(-(np.nan_to_num(moved_px) / STILL_PX) ** 2), 0.0)
-    near_now = cv2.GaussianBlur((alpha * still).astype(np.float32), (0, 0), reach_px)
-    near_rest = cv2.GaussianBlur(alpha_rest.astype(np.float32), (0, 0), reach_px)
-    beside = np.clip(near_now / np.maximum(near_rest, 1e-3), 0.0, 1.0) * (near_rest > 1e-3) * outside
-    fill = fill.astype(np.float32)
-    return fill + beside[..., None] * (photo.astype(np.float32) - fill)
 
+    def __init__(self, photo: np.ndarray, fill: np.ndarray, mask: np.ndarray, alpha_rest: np.ndarray):
+        h, w = alpha_rest.shape
+        self.photo, self.fill = photo.astype(np.float32), fill.astype(np.float32)
+        self.outside = 1.0 - resize_to((mask > 0).astype(np.float32), w, h)
+        self.pixels = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5
+        beyond = (self.outside > 0.5).astype(np.uint8)
+        ring = beyond.astype(bool) & (np.abs(self.fill - self.photo).max(-1) > 0)
+        # the ring's width: how far the fill reaches past the masks (output pixels)
+        reach = cv2.distanceTransform(beyond, cv2.DIST_L2, 3)[ring]
+        self.reach_px = float(max(1.0, reach.max())) if ring.any() else 1.0
+        self.near_rest = cv2.GaussianBlur(alpha_rest.astype(np.float32), (0, 0), self.reach_px)
 
-def ring_reach_px(photo: np.ndarray, fill: np.ndarray, outside: np.ndarray) -> float:
-    """Width (output pixels, at least 1) of the ring of fill around the objects' masks: how far the
-    inpainted background reaches past them. Arguments as for :func:`background_beside`."""
-    beyond = (outside > 0.5).astype(np.uint8)
-    ring = beyond.astype(bool) & (np.abs(fill.astype(np.int16) - photo.astype(np.int16)).max(-1) > 0)
-    if not ring.any():
-        return 1.0
-    return float(max(1.0, cv2.distanceTransform(beyond, cv2.DIST_L2, 3)[ring].max()))
+    def __call__(self, alpha: np.ndarray, source_uv: np.ndarray) -> np.ndarray:
+        """(h, w, 3) float32 in [0, 255], the background of a frame.
+
+        Args:
+            alpha: (h, w) the frame's rendered alpha.
+            source_uv: (h, w, 2) its source map at output resolution, as rendered (unsmoothed:
+                smoothing pulls it inwards by a fraction of a pixel at the silhouette); NaN off the object.
+        """
+        moved = np.linalg.norm(source_uv - self.pixels, axis=-1)
+        still = np.where(np.isfinite(moved), np.exp(-(np.nan_to_num(moved) / STILL_PX) ** 2), 0.0)
+        near_now = cv2.GaussianBlur((alpha * still).astype(np.float32), (0, 0), self.reach_px)
+        beside = np.clip(near_now / np.maximum(self.near_rest, 1e-3), 0.0, 1.0) * (self.near_rest > 1e-3)
+        return self.fill + (beside * self.outside)[..., None] * (self.photo - self.fill)

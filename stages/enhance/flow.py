@@ -13,7 +13,7 @@ Where the map is not smooth (tumbling, flowing material) the render is used.
 The photograph's shading is then moved from where the surface faced at rest to
 where it faces now (relight.py), and the result is blended with the rendered alpha over the inpainted
 background, which shows the photograph itself beside the object wherever the object still stands as at
-rest (compositing.background_beside).
+rest (compositing.Backdrop).
 """
 from __future__ import annotations
 
@@ -25,8 +25,7 @@ from scipy import signal
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import (background_beside, blend_over_background, normalised_blur, resize_to, ring_reach_px,
-                          sample_at, unpremultiply)
+from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
 from .relight import Relighting
 
 log = logging.getLogger("physmotion.enhance.flow")
@@ -112,10 +111,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
     fine_photo = band_limited_upsample(photo)
-    background = resize_to(gaussians.background, w, h)
-    outside = 1.0 - resize_to((gaussians.mask > 0).astype(np.float32), w, h)
-    pixels = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5
-    reach = ring_reach_px(photo, background, outside)
+    backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
     relighting = Relighting.fit(coarse, photo) if relight else None
     frames = np.empty((T, h, w, 3), np.uint8)
@@ -130,10 +126,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         colour = weight * from_photo + (1.0 - weight) * rendered
         if relighting is not None:
             colour = relighting(t, colour, uv)
-        # the map as rendered: the smoothing above pulls it inwards by a fraction of a pixel at the silhouette
-        moved = np.linalg.norm(coarse.source_uv[t] * scale - pixels, axis=-1)
-        frames[t] = blend_over_background(colour, coarse.alpha[t], background_beside(
-            photo, background, outside, coarse.alpha[t], coarse.alpha[0], moved, reach))
+        background = backdrop(coarse.alpha[t], coarse.source_uv[t] * scale)
+        frames[t] = blend_over_background(colour, coarse.alpha[t], background)
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph", t + 1, T,
                  100.0 * float(weight[..., 0][coarse.alpha[t] > 0.5].mean()) if (coarse.alpha[t] > 0.5).any() else 0.0)
     return frames

@@ -20,7 +20,7 @@ from schemas import InputError
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, scheduler_json
 from schemas.diffusion import DiffusionSettings
 
-from ..compositing import blend_over_background, resize_to, unpremultiply
+from ..compositing import Backdrop, blend_over_background, resize_to, unpremultiply
 from .components import Components
 from .conditioning import canny_control, inverse_depth_control, model_size, to_tensor, to_u8
 from .inversion import inverse_scheduler, invert_video, stored_timesteps
@@ -45,8 +45,11 @@ class VideoInputs:
 
 def video_inputs(coarse: CoarseArtifact, gaussians: GaussiansArtifact, settings: DiffusionSettings) -> VideoInputs:
     h, w = coarse.alpha.shape[1:]
-    background = resize_to(gaussians.background, w, h)
-    blended = blend_over_background(unpremultiply(coarse.rgb, coarse.alpha), coarse.alpha, background)
+    backdrop = Backdrop(resize_to(gaussians.photo, w, h), resize_to(gaussians.background, w, h), gaussians.mask,
+                        coarse.alpha[0])
+    scale = w / gaussians.width  # photograph pixels -> output pixels
+    blended = np.stack([blend_over_background(unpremultiply(rgb, alpha), alpha, backdrop(alpha, uv * scale))
+                        for rgb, alpha, uv in zip(coarse.rgb, coarse.alpha, coarse.source_uv)])
     height, width = model_size(h, w, settings.resolution)
     blended = np.stack([resize_to(f, width, height) for f in blended])
     depth = np.stack([resize_to(d, width, height) for d in inverse_depth_control(coarse.depth, coarse.alpha)])
