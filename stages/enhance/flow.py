@@ -116,7 +116,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     relighting = Relighting.fit(coarse, photo) if relight else None
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
-        uv = smooth_source(coarse.source_uv[t] * scale)
+        rendered_uv = coarse.source_uv[t] * scale
+        uv = smooth_source(rendered_uv)
         from_photo = photograph_at(fine_photo, uv)
         trusted = trust(coarse.source_confidence[t], threshold)
         if hidden_surfaces == "photo":
@@ -126,7 +127,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         colour = weight * from_photo + (1.0 - weight) * rendered
         if relighting is not None:
             colour = relighting(t, colour, uv)
-        background = backdrop(coarse.alpha[t], coarse.source_uv[t] * scale)
+        background = backdrop(coarse.alpha[t], rendered_uv)
         frames[t] = blend_over_background(colour, coarse.alpha[t], background)
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph", t + 1, T,
                  100.0 * float(weight[..., 0][coarse.alpha[t] > 0.5].mean()) if (coarse.alpha[t] > 0.5).any() else 0.0)

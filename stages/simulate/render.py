@@ -23,7 +23,8 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.video import even_size
 
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, affine_source_maps, coherence, facing_normals,
-                         rest_visibility, source_points, source_roughness, surface_normals, visibility)
+                         inverse_deformation, rest_visibility, source_points, source_roughness, surface_normals,
+                         visibility)
 
 log = logging.getLogger("physmotion.render")
 
@@ -49,7 +50,6 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
     rest_cov = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
     rest_seen = rest_visibility(rest_means, rest_cov, opacities, gaussians)
     rest_normals = surface_normals(rest_means)
-    w2c = t(gaussians.world_to_camera)
     log.info("%d Gaussians, %.0f%% visible in the photograph; rendering %d frames at %dx%d",
              G, 100 * float((rest_seen > 0.5).float().mean()), trajectories.positions.shape[0],
              camera.width, camera.height)
@@ -66,8 +66,9 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             # Only the surface in front decides a pixel's source: what leaks through it from behind
             # (the far side, which maps to elsewhere in the photograph) would scatter the map.
             votes = visibility(render, means, covariances, camera).clamp_min(MIN_VOTE)[:, None]
-            normals = facing_normals(rest_normals, means, F, w2c)
-            maps = affine_source_maps(rest_means, means, normals, F, gaussians, camera.K).to(votes.dtype)
+            F_inverse = inverse_deformation(F)
+            normals = facing_normals(rest_normals, means, F_inverse, gaussians.world_to_camera)
+            maps = affine_source_maps(rest_means, means, normals, F_inverse, gaussians, camera.K).to(votes.dtype)
             voting = votes * torch.cat([maps, normals, rest_seen[:, None], torch.ones_like(votes)], 1)
             front = splat.rasterize(means, opacities, voting, camera, covariances=covariances).features
             front, normal, seen, voted = front.split([AFFINE_CHANNELS, 3, 1, 1], -1)

@@ -39,20 +39,15 @@ def full_camera(gaussians: GaussiansArtifact) -> splat.Camera:
                         gaussians.width, gaussians.height)
 
 
-def _to_camera(points: torch.Tensor, gaussians: GaussiansArtifact) -> torch.Tensor:
-    w2c = torch.as_tensor(gaussians.world_to_camera, dtype=points.dtype, device=points.device)
+def to_camera(points: torch.Tensor, world_to_camera) -> torch.Tensor:
+    """(N, 3) world points -> (N, 3) camera-frame points; world_to_camera (4, 4), torch or numpy."""
+    w2c = torch.as_tensor(world_to_camera, dtype=points.dtype, device=points.device)
     return points @ w2c[:3, :3].T + w2c[:3, 3]
 
 
 def project(points_cam: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
     """(N, 3) camera-frame points -> (N, 2) image points of intrinsics K (pixel centres at +0.5)."""
     return points_cam[:, :2] / points_cam[:, 2:3].clamp_min(1e-9) * torch.stack([K[0, 0], K[1, 1]]) + K[:2, 2]
-
-
-def project_to_photo(points: torch.Tensor, gaussians: GaussiansArtifact) -> torch.Tensor:
-    """(N, 3) world points -> (N, 2) image points of the full-resolution photograph."""
-    return project(_to_camera(points, gaussians), torch.as_tensor(gaussians.K, dtype=points.dtype,
-                                                                  device=points.device))
 
 
 def visibility(surface: splat.Render, means: torch.Tensor, covariances: torch.Tensor,
@@ -70,9 +65,8 @@ def visibility(surface: splat.Render, means: torch.Tensor, covariances: torch.Te
         surface: the render of these Gaussians from ``camera``.
         means: (G, 3) world positions; covariances: (G, 3, 3), as rendered.
     """
-    w2c = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
     K = torch.as_tensor(camera.K, dtype=means.dtype, device=means.device)
-    in_camera = means @ w2c[:3, :3].T + w2c[:3, 3]
+    in_camera = to_camera(means, camera.world_to_camera)
     uv = project(in_camera, K)
     col = uv[:, 0].floor().long().clamp(0, camera.width - 1)
     row = uv[:, 1].floor().long().clamp(0, camera.height - 1)
@@ -105,7 +99,7 @@ def surface_normals(rest_means: torch.Tensor, neighbours: int = SURFACE_NEIGHBOU
     return torch.as_tensor(vectors[:, :, 0], device=rest_means.device)
 
 
-def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: torch.Tensor, F: torch.Tensor,
+def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: torch.Tensor, F_inverse: torch.Tensor,
                        gaussians: GaussiansArtifact, K_frame: torch.Tensor) -> torch.Tensor:
     """(G, 6) per Gaussian, the affine map  uv = b + J p  from image points p of the frame
     (intrinsics K_frame, the photograph's pose) to image points uv of the full-resolution photograph.
@@ -121,7 +115,7 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     Args:
         rest_means, means: (G, 3) centres at rest and now, metres, world frame.
         normals: (G, 3) surface normals now, camera frame (:func:`facing_normals`).
-        F: (G, 3, 3) deformation gradients.
+        F_inverse: (G, 3, 3) inverses of the deformation gradients (:func:`inverse_deformation`).
         K_frame: (3, 3) intrinsics of the frame.
     Returns:
         (G, 6) float64: b (2) and J (2 x 2, row-major) in photograph pixels per frame pixel.
@@ -129,8 +123,8 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     f64 = lambda a: torch.as_tensor(a, dtype=torch.float64, device=means.device)  # noqa: E731
     R = f64(gaussians.world_to_camera)[:3, :3]
     K_photo, K_frame = f64(gaussians.K), f64(K_frame)
-    F_inverse = torch.linalg.pinv(f64(F))  # a Gaussian crushed flat (rank-deficient F) keeps a finite map
-    centre, normal = _to_camera(f64(means), gaussians), f64(normals)
+    F_inverse = f64(F_inverse)
+    centre, normal = to_camera(f64(means), gaussians.world_to_camera), f64(normals)
     facing = (normal * centre).sum(-1)
     limit = MIN_GRAZING_COS * normal.norm(dim=-1) * centre.norm(dim=-1)
     facing = torch.where(facing < 0, -1.0, 1.0) * torch.maximum(facing.abs(), limit)
@@ -139,7 +133,7 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     lift = centre[:, 2, None, None] * (eye - centre[:, :, None] * normal[:, None, :] / facing[:, None, None]) \
         @ torch.linalg.inv(K_frame)[:, :2]
     to_rest = F_inverse @ R.T @ lift  # (G, 3, 2) world displacement at rest per pixel
-    rest_cam = _to_camera(f64(rest_means), gaussians)
+    rest_cam = to_camera(f64(rest_means), gaussians.world_to_camera)
     z = rest_cam[:, 2].clamp_min(1e-9)
     zero = torch.zeros_like(z)
     d_project = torch.stack([torch.stack([K_photo[0, 0] / z, zero, -K_photo[0, 0] * rest_cam[:, 0] / z ** 2], -1),
@@ -149,7 +143,13 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     return torch.cat([b, J.reshape(-1, 4)], 1)
 
 
-def facing_normals(rest_normals: torch.Tensor, means: torch.Tensor, F: torch.Tensor,
+def inverse_deformation(F: torch.Tensor) -> torch.Tensor:
+    """(G, 3, 3) float64 F^-1 of each Gaussian's deformation gradient, as a pseudo-inverse: a
+    Gaussian crushed flat (rank-deficient F) keeps a finite normal and source map."""
+    return torch.linalg.pinv(F.to(torch.float64))
+
+
+def facing_normals(rest_normals: torch.Tensor, means: torch.Tensor, F_inverse: torch.Tensor,
                    world_to_camera: torch.Tensor) -> torch.Tensor:
     """(G, 3) unit normals of the surface at each Gaussian now, camera frame, turned towards the
     camera: the rest normals carried by the deformation (F^-T N). Any surface the camera sees
@@ -157,13 +157,12 @@ def facing_normals(rest_normals: torch.Tensor, means: torch.Tensor, F: torch.Ten
 
     Args:
         rest_normals: (G, 3) world frame (:func:`surface_normals`); means: (G, 3) centres now;
-        F: (G, 3, 3) deformation gradients; world_to_camera: (4, 4).
+        F_inverse: (G, 3, 3) (:func:`inverse_deformation`); world_to_camera: (4, 4).
     """
-    R, T = world_to_camera[:3, :3].to(means.dtype), world_to_camera[:3, 3].to(means.dtype)
-    # pinv: a Gaussian crushed flat (rank-deficient F) keeps a finite normal
-    normals = (rest_normals.to(means.dtype)[:, None, :] @ torch.linalg.pinv(F.to(means.dtype)))[:, 0] @ R.T
+    R = torch.as_tensor(world_to_camera, dtype=means.dtype, device=means.device)[:3, :3]
+    normals = (rest_normals.to(means.dtype)[:, None, :] @ F_inverse.to(means.dtype))[:, 0] @ R.T
     normals = normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    towards_camera = ((means @ R.T + T) * normals).sum(-1) < 0
+    towards_camera = (to_camera(means, world_to_camera) * normals).sum(-1) < 0
     return torch.where(towards_camera[:, None], normals, -normals)
 
 
