@@ -108,9 +108,9 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     now, carried by its motion and deformation, the plane through x_k with normal F^-T N_k
     (:func:`facing_normals`). A pixel is lifted onto that plane, taken back to rest
     (X = X_k + F^-1 (x - x_k)) and projected into the photograph; J is that chain's derivative at
-    the Gaussian's centre, b makes the centre land on X_k's projection. At rest (F = I) every map is exactly the change of resolution, so
-    their blend is too. A surface the photograph never saw (the back) maps onto the point of the
-    photograph in front of it.
+    the Gaussian's centre, b makes the centre land on X_k's projection. At rest (F = I) every map
+    is exactly the change of resolution, so their blend is too. A surface the photograph never saw
+    (the back) maps onto the point of the photograph in front of it.
 
     Args:
         rest_means, means: (G, 3) centres at rest and now, metres, world frame.
