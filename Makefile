@@ -4,8 +4,6 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 INSTALLED := $(VENV)/.installed
-# The stage programs (pm-*) live in the venv; snakemake rules call them by name.
-export PATH := $(CURDIR)/$(BIN):$(PATH)
 
 .PHONY: demo test debug-kernels
 

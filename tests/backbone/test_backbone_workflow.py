@@ -18,7 +18,9 @@ from .conftest import write_scene
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
-ENV = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+# As the README runs it (.venv/bin/snakemake, venv not activated): the stage programs are not on PATH.
+ENV = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep)
+                                             if Path(p).resolve() != BIN.resolve())}
 
 
 def snakemake(workdir: Path, *args: str) -> str:

@@ -17,12 +17,28 @@ def capsule_photo():
     return photograph(Capsule.tilted(), K, np.eye(4), 128, 96)
 
 
-def test_grabcut_box_finds_the_object(capsule_photo):
-    rows, cols = np.nonzero(capsule_photo.mask)
-    box = (cols.min() - 6, rows.min() - 6, cols.max() + 7, rows.max() + 7)
-    labels = segment_objects(capsule_photo.rgb, None, [ObjectSpec(box=box)])
+@pytest.mark.parametrize("scale", [1, 12])  # 128 x 96, and 1536 x 1152: segmented on a 1024 px copy
+def test_grabcut_box_finds_the_object(capsule_photo, scale):
+    size = (128 * scale, 96 * scale)
+    rgb = cv2.resize(capsule_photo.rgb, size, interpolation=cv2.INTER_NEAREST)
+    truth = cv2.resize(capsule_photo.mask.astype(np.uint8), size, interpolation=cv2.INTER_NEAREST) > 0
+    rows, cols = np.nonzero(truth)
+    margin = 6 * scale
+    box = (cols.min() - margin, rows.min() - margin, cols.max() + 1 + margin, rows.max() + 1 + margin)
+    labels = segment_objects(rgb, None, [ObjectSpec(box=box)])
     assert set(np.unique(labels)) == {0, 1}
-    assert iou(labels == 1, capsule_photo.mask) > 0.9
+    assert iou(labels == 1, truth) > 0.9
+
+
+@pytest.mark.parametrize("box, problem", [
+    ((200, 150, 300, 250), "lies outside the 128x96 photograph"),  # drawn on a larger copy of the photograph
+    ((0, 0, 60, 30), r"kept \d+ pixels, 0\.\d\d % of the box \[0, 0, 60, 30\]"),  # background only
+])
+def test_a_box_that_misses_the_object_is_refused(capsule_photo, box, problem):
+    assert not capsule_photo.mask[:30, :60].any()
+    with pytest.raises(InputError, match=problem) as err:
+        segment_objects(capsule_photo.rgb, None, [ObjectSpec(box=box)], "s/scene.yaml")
+    assert (err.value.file, err.value.field) == ("s/scene.yaml", "objects[0].box")
 
 
 def test_alpha_is_the_mask_and_mask_files_are_checked(capsule_photo, tmp_path):
