@@ -2,6 +2,8 @@
 import cv2
 import numpy as np
 import pytest
+import skimage.data
+from scipy import ndimage
 
 from schemas import InputError
 from stages.reconstruct.background import EXEMPLAR_MAX_PX, SEAM_WIDTH, dilation_px, inpaint_background
@@ -28,6 +30,21 @@ def test_grabcut_box_finds_the_object(capsule_photo, scale):
     labels = segment_objects(rgb, None, [ObjectSpec(box=box)])
     assert set(np.unique(labels)) == {0, 1}
     assert iou(labels == 1, truth) > 0.9
+
+
+@pytest.mark.parametrize("box", [(15, 26, 73, 80), (120, 18, 190, 84)])
+def test_grabcut_separates_an_object_from_look_alikes_elsewhere(box):
+    """scikit-image's coins: two dozen bright coins on a dark ground. Learnt from the whole photograph,
+    the background's colours hold the other coins and GrabCut found nothing in these boxes. The
+    reference: Otsu's threshold inside the box, holes filled (bright coin, dark ground)."""
+    gray = skimage.data.coins()
+    x0, y0, x1, y1 = box
+    roi = gray[y0:y1, x0:x1]
+    threshold, _ = cv2.threshold(roi, 0, 255, cv2.THRESH_BINARY + cv2.THRESH_OTSU)
+    reference = np.zeros(gray.shape, bool)
+    reference[y0:y1, x0:x1] = ndimage.binary_fill_holes(roi > threshold)
+    labels = segment_objects(np.repeat(gray[..., None], 3, axis=2), None, [ObjectSpec(box=box)])
+    assert iou(labels == 1, reference) > 0.95
 
 
 @pytest.mark.parametrize("box, problem", [
