@@ -292,11 +292,12 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
 
 def _check_images(scene: Scene) -> None:
     """The photograph and masks must be readable, masks the photo's size and not empty, boxes inside."""
-    import cv2
     import numpy as np
 
+    from .images import read_image
+
     yaml_file = scene.file
-    photo = cv2.imread(str(scene.image), cv2.IMREAD_UNCHANGED)
+    photo = read_image(scene.image)
     if photo is None:
         raise InputError(scene.image, None, "cannot read this file as an image",
                          "give a PNG or JPEG photograph in 'image' of " + str(yaml_file))
@@ -308,7 +309,7 @@ def _check_images(scene: Scene) -> None:
                 raise InputError(yaml_file, f"objects[{k}].box", f"box {list(obj.box)} reaches outside the "
                                  f"{w}x{h} image", f"keep 0 <= x <= {w} and 0 <= y <= {h}")
         if obj.mask is not None:
-            mask = cv2.imread(str(obj.mask), cv2.IMREAD_UNCHANGED)
+            mask = read_image(obj.mask)
             if mask is None:
                 raise InputError(obj.mask, None, "cannot read this file as an image",
                                  f"give a PNG mask in objects[{k}].mask of {yaml_file}")

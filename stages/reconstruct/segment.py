@@ -15,6 +15,7 @@ import numpy as np
 from scipy import ndimage
 
 from schemas import InputError
+from schemas.images import read_image
 
 from .geometry import working_size
 from .local_model import load_local_model
@@ -48,7 +49,7 @@ class ObjectSpec:
 
 def read_photo(path: Path) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """The photograph as RGB u8 (H,W,3) and its alpha (H,W) u8, None when it has none or it is all opaque."""
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    raw = read_image(path)
     if raw is None:
         raise InputError(path, None, "cannot read this file as an image", "give a PNG or JPEG file")
     if raw.dtype != np.uint8:  # 16-bit PNGs: keep the top byte
@@ -99,16 +100,6 @@ def grabcut(photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
     return largest_component(mask)
 
 
-def box_in_photo(box: Sequence[float], width: int, height: int, scene_file: Path | str,
-                 field: str) -> tuple[float, float, float, float]:
-    """``box`` [x0, y0, x1, y1] (pixels) clipped to the photograph; an InputError if little of it is inside."""
-    x0, y0, x1, y1 = max(0.0, box[0]), max(0.0, box[1]), min(float(width), box[2]), min(float(height), box[3])
-    if x1 - x0 < 2 or y1 - y0 < 2:
-        raise InputError(scene_file, field, f"box {list(box)} lies outside the {width}x{height} photograph",
-                         f"give the box in the photograph's own pixels, within [0, 0, {width}, {height}]")
-    return x0, y0, x1, y1
-
-
 def check_box_fill(mask: np.ndarray, box: Sequence[float], scene_file: Path | str, field: str, fix: str) -> None:
     """An InputError when the segmentation (H,W) kept less than MIN_BOX_FILL of ``box``."""
     height, width = mask.shape
@@ -122,7 +113,7 @@ def check_box_fill(mask: np.ndarray, box: Sequence[float], scene_file: Path | st
 
 def read_mask(path: Path, shape: tuple[int, int], field: str) -> np.ndarray:
     """Boolean mask from a mask image: non-zero (any channel, or alpha) is the object."""
-    raw = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    raw = read_image(path)
     if raw is None:
         raise InputError(path, field, "cannot read this file as an image", "give a PNG mask")
     if raw.shape[:2] != shape:
@@ -150,9 +141,8 @@ def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Seq
         if spec.mask is not None:
             mask = read_mask(spec.mask, (height, width), f"{field}.mask")
         elif spec.box is not None:
-            box = box_in_photo(spec.box, width, height, scene_file, f"{field}.box")
-            mask = sam.segment(photo, box) if sam is not None else grabcut(photo, box)
-            check_box_fill(mask, box, scene_file, f"{field}.box", "draw the box around the whole object with a "
+            mask = sam.segment(photo, spec.box) if sam is not None else grabcut(photo, spec.box)
+            check_box_fill(mask, spec.box, scene_file, f"{field}.box", "draw the box around the whole object with a "
                            "few pixels to spare, in this photograph's pixels, or give a mask file")
         elif alpha is not None and len(objects) == 1:
             mask = alpha > 127

@@ -47,14 +47,11 @@ def test_grabcut_separates_an_object_from_look_alikes_elsewhere(box):
     assert iou(labels == 1, reference) > 0.95
 
 
-@pytest.mark.parametrize("box, problem", [
-    ((200, 150, 300, 250), "lies outside the 128x96 photograph"),  # drawn on a larger copy of the photograph
-    ((0, 0, 60, 30), r"kept \d+ pixels, 0\.\d\d % of the box \[0, 0, 60, 30\]"),  # background only
-])
-def test_a_box_that_misses_the_object_is_refused(capsule_photo, box, problem):
+def test_a_box_that_misses_the_object_is_refused(capsule_photo):
     assert not capsule_photo.mask[:30, :60].any()
+    problem = r"kept \d+ pixels, 0\.\d\d % of the box \[0, 0, 60, 30\] in the 128x96 photograph"
     with pytest.raises(InputError, match=problem) as err:
-        segment_objects(capsule_photo.rgb, None, [ObjectSpec(box=box)], "s/scene.yaml")
+        segment_objects(capsule_photo.rgb, None, [ObjectSpec(box=(0, 0, 60, 30))], "s/scene.yaml")
     assert (err.value.file, err.value.field) == ("s/scene.yaml", "objects[0].box")
 
 
