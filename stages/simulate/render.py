@@ -8,7 +8,8 @@ and its visibility at rest (source_map.py). Their blend gives ``source_uv``
 (where each pixel's surface was in the photograph; for a surface the photograph
 never saw, the point of the photograph in front of it, whose colour the
 reconstruction gave it), ``source_coherence`` (how smoothly the photograph maps
-onto the frame there), ``source_confidence`` (how visible the surface was at
+onto the frame there, and how well the surface in front agrees on where each
+pixel came from), ``source_confidence`` (how visible the surface was at
 rest, times the coherence) and ``normal``: the flow enhancement reads the
 photograph through them and re-shades it.
 """
@@ -22,9 +23,9 @@ import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
-from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, affine_source_maps, coherence, facing_normals,
-                         inverse_deformation, rest_visibility, source_points, source_roughness, surface_normals,
-                         visibility)
+from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
+                         facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
+                         source_roughness, source_spread, surface_normals, visibility)
 
 log = logging.getLogger("physmotion.render")
 
@@ -65,18 +66,28 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             covered = alpha >= MIN_ALPHA
             # Only the surface in front decides a pixel's source: what leaks through it from behind
             # (the far side, which maps to elsewhere in the photograph) would scatter the map.
-            votes = visibility(render, means, covariances, camera).clamp_min(MIN_VOTE)[:, None]
+            seen_now = visibility(render, means, covariances, camera)[:, None]
+            votes = seen_now.clamp_min(MIN_VOTE)
             F_inverse = inverse_deformation(F)
             normals = facing_normals(rest_normals, means, F_inverse, gaussians.world_to_camera)
-            maps = affine_source_maps(rest_means, means, normals, F_inverse, gaussians, camera.K).to(votes.dtype)
-            voting = votes * torch.cat([maps, normals, rest_seen[:, None], torch.ones_like(votes)], 1)
-            front = splat.rasterize(means, opacities, voting, camera, covariances=covariances).features
-            front, normal, seen, voted = front.split([AFFINE_CHANNELS, 3, 1, 1], -1)
+            maps = affine_source_maps(rest_means, means, normals, F_inverse, gaussians, camera.K)
+            moments = map_moments(maps).to(votes.dtype)
+            maps = maps.to(votes.dtype)
+            # The spread of sources is taken over the surface in front alone (unfloored votes): a
+            # per cent of the far side, leaking through from a source across the object, would
+            # otherwise read as disagreement.
+            voting = torch.cat([votes * torch.cat([maps, normals, rest_seen[:, None], torch.ones_like(votes)], 1),
+                                seen_now * torch.cat([maps, moments, torch.ones_like(votes)], 1)], 1)
+            channels = splat.rasterize(means, opacities, voting, camera, covariances=covariances).features
+            voted_maps, normal, seen, voted, front_maps, front_moments, front_votes = channels.split(
+                [AFFINE_CHANNELS, 3, 1, 1, AFFINE_CHANNELS, MOMENT_CHANNELS, 1], -1)
             voted = voted[..., 0].clamp_min(MIN_ALPHA)
-            source_uv = torch.where(covered[..., None], source_points(front, voted), torch.nan)
+            source_uv = torch.where(covered[..., None], source_points(voted_maps, voted), torch.nan)
             normal = normal / normal.norm(dim=-1, keepdim=True).clamp_min(1e-12)
             seen_fraction = (seen[..., 0] / voted).clamp(0, 1)
-            smooth = torch.where(covered, coherence(source_roughness(source_uv) * scale), 0.0)
+            front_votes = front_votes[..., 0]
+            spread = source_spread(front_moments, front_votes, source_points(front_maps, front_votes))
+            smooth = torch.where(covered, coherence(source_roughness(source_uv) * scale, spread * scale), 0.0)
             out["rgb"].append((render.features.clamp(0, 1) * 255 + 0.5).to(torch.uint8))
             out["alpha"].append(alpha)
             out["depth"].append(render.depth)

@@ -9,6 +9,7 @@ import splat
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from stages.enhance.flow import band_limited_upsample, enhance_frames, photograph_at, sample_at
 from stages.simulate.render import render_video
+from stages.simulate.source_map import map_moments, source_points, source_spread
 
 W, H, FOCAL, DEPTH = 48, 40, 60.0, 1.0
 
@@ -126,6 +127,44 @@ def test_scrambled_surface_falls_back_to_the_render():
     frames = enhance_frames(coarse, gaussians, threshold=0.5)
     rendered = coarse.rgb[1][disc].astype(float) / coarse.alpha[1][disc, None]
     assert np.abs(frames[1][disc] - rendered).mean() < 3.0
+
+
+def test_mixed_grains_fall_back_to_the_render():
+    """As test_scrambled_surface_falls_back_to_the_render, with every Gaussian four times wider and
+    translucent (opacity 0.2): each pixel now blends dozens of sources from all over the disc, whose
+    mean is near the disc's middle everywhere. That blended map is smooth (its roughness trusted it
+    everywhere), but no grain came from there: the sources' spread must withdraw the trust."""
+    gaussians = disc_gaussians()
+    gaussians.scales[:, :2] *= 4
+    gaussians.opacities[:] = 0.2
+    front = len(gaussians.means) // 2
+    order = np.random.default_rng(0).permutation(front)
+    mixed = translated(gaussians, [0, 0])
+    mixed.positions[1, :front] = gaussians.means[order]
+    coarse = render_video(gaussians, mixed, width=W, device="cpu")
+    _, disc = textured_photo()
+    inner = cv2.erode(disc.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    assert coarse.source_coherence[0][inner].min() > 0.95
+    assert coarse.source_coherence[1][inner].mean() < 0.1
+
+
+def test_source_spread_is_the_weighted_spread_of_the_gaussians_sources():
+    """source_spread from the blended moments against the float64 spread of each Gaussian's map applied
+    to the pixel, for random maps and blending weights."""
+    rng = np.random.default_rng(1)
+    h, w, G = 3, 4, 5
+    maps = torch.as_tensor(np.concatenate([rng.uniform(0, 500, (G, 2)), rng.normal(1, 0.5, (G, 4))], 1))
+    weights = torch.as_tensor(rng.uniform(0, 1, (h, w, G)))
+    voted_maps, voted_moments = weights @ maps, weights @ map_moments(maps)
+    votes = weights.sum(-1)
+    spread = source_spread(voted_moments, votes, source_points(voted_maps, votes))
+    for i in range(h):
+        for j in range(w):
+            p = np.array([j + 0.5, i + 0.5])
+            sources = np.array([m[:2] + m[2:].reshape(2, 2) @ p for m in maps.numpy()])
+            share = weights[i, j].numpy() / weights[i, j].numpy().sum()
+            expected = np.sqrt(share @ np.square(sources - share @ sources).sum(1))
+            assert abs(float(spread[i, j]) - expected) < 1e-6 * max(1.0, expected)
 
 
 def test_revealed_hidden_layer_reads_the_photograph_through_the_object():
