@@ -112,15 +112,20 @@ def test_background_where_the_object_left(shifted_run):
     assert np.abs(frames[-1][uncovered].astype(int) - 128).max() <= 1
 
 
+def shuffled_front(gaussians: GaussiansArtifact) -> TrajectoriesArtifact:
+    """Two frames: at rest, then the front layer's Gaussians shuffled among each other's places."""
+    front = len(gaussians.means) // 2
+    order = np.random.default_rng(0).permutation(front)
+    shuffled = translated(gaussians, [0, 0])
+    shuffled.positions[1, :front] = gaussians.means[order]
+    return shuffled
+
+
 def test_scrambled_surface_falls_back_to_the_render():
     """Gaussians shuffled among each other's places: every pixel now blends sources from all over the
     photograph, so the lookup is incoherent and the enhancement must show the render, not a mix."""
     gaussians = disc_gaussians()
-    front = len(gaussians.means) // 2
-    order = np.random.default_rng(0).permutation(front)
-    scrambled = translated(gaussians, [0, 0])
-    scrambled.positions[1, :front] = gaussians.means[order]
-    coarse = render_video(gaussians, scrambled, width=W, device="cpu")
+    coarse = render_video(gaussians, shuffled_front(gaussians), width=W, device="cpu")
     _, disc = textured_photo()
     assert coarse.source_confidence[0][disc].mean() > 0.95
     assert coarse.source_confidence[1][disc].mean() < 0.1
@@ -137,11 +142,7 @@ def test_mixed_grains_fall_back_to_the_render():
     gaussians = disc_gaussians()
     gaussians.scales[:, :2] *= 4
     gaussians.opacities[:] = 0.2
-    front = len(gaussians.means) // 2
-    order = np.random.default_rng(0).permutation(front)
-    mixed = translated(gaussians, [0, 0])
-    mixed.positions[1, :front] = gaussians.means[order]
-    coarse = render_video(gaussians, mixed, width=W, device="cpu")
+    coarse = render_video(gaussians, shuffled_front(gaussians), width=W, device="cpu")
     _, disc = textured_photo()
     inner = cv2.erode(disc.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
     assert coarse.source_coherence[0][inner].min() > 0.95
