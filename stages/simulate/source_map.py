@@ -251,14 +251,19 @@ def source_roughness(source_uv: torch.Tensor) -> torch.Tensor:
     return rough.sqrt()
 
 
+def falling_ramp(x: torch.Tensor, bounds: tuple[float, float]) -> torch.Tensor:
+    """1 up to bounds[0], 0 from bounds[1], linear between."""
+    return ((bounds[1] - x) / (bounds[1] - bounds[0])).clamp(0, 1)
+
+
 def coherence(roughness_px: torch.Tensor, spread_px: torch.Tensor) -> torch.Tensor:
     """1 where the photograph maps smoothly onto the frame and the Gaussians covering each pixel
     agree on where it came from, falling to 0 where either fails (roughness and spread in output
     pixels): sampling a jumbled source map would scatter the photograph's pixels into noise, and a
     blend of disagreeing sources reads a place that none of them came from, so the render is
     trusted there instead."""
-    ramp = lambda x, bounds: ((bounds[1] - x) / (bounds[1] - bounds[0])).clamp(0, 1)  # noqa: E731
-    trusted = (ramp(roughness_px, SMOOTH_SOURCE_PX) * ramp(spread_px, SOURCE_SPREAD_PX))[None, None]
+    trusted = falling_ramp(roughness_px, SMOOTH_SOURCE_PX) * falling_ramp(spread_px, SOURCE_SPREAD_PX)
+    trusted = trusted[None, None]
     # Trust changes over regions, not from pixel to pixel (which would speckle the frame with
     # alternating photo and render): a 3x3 minimum, then a 3x3 mean.
     regional = torch.nn.functional.avg_pool2d(-torch.nn.functional.max_pool2d(-trusted, 3, 1, 1), 3, 1, 1,
