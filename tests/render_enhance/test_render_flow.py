@@ -8,7 +8,7 @@ import torch
 import splat
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from stages.enhance.flow import band_limited_upsample, enhance_frames, photograph_at, sample_at
-from stages.simulate.render import render_video
+from stages.simulate.render import render_camera, render_video
 from stages.simulate.source_map import map_moments, source_points, source_spread
 
 W, H, FOCAL, DEPTH = 48, 40, 60.0, 1.0
@@ -76,6 +76,12 @@ def test_frame0_is_the_reconstruction_render(shifted_run):
     assert np.abs(coarse.alpha[0] - direct.alpha.numpy()).max() < 1e-5
     expected_rgb = (direct.features.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
     assert np.abs(coarse.rgb[0].astype(int) - expected_rgb).max() <= 1
+
+
+@pytest.mark.parametrize("width, size", [(20, (20, 16)), (31, (30, 26)), (100, (W, H))])
+def test_output_size_follows_render_width_up_to_the_photograph_in_even_pixels(width, size):
+    camera = render_camera(disc_gaussians(), width)
+    assert (camera.width, camera.height) == size  # W x H = 48 x 40, the photograph's own size
 
 
 def test_source_uv_maps_rest_pixels_onto_themselves(shifted_run):
