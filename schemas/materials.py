@@ -79,11 +79,14 @@ class Snow(_Elastic):
     hardening: float = Field(10.0, ge=0, description="xi: stiffness grows as exp(xi (1 - J_p))")
 
 
-class Rigid(_Elastic):
-    """A body whose shape does not change."""
+class Rigid(BaseModel):
+    """A body whose shape does not change: it moves as one (six degrees of freedom), so it has no
+    elastic constants and no elastic wave bounds its time step."""
+
+    model_config = ConfigDict(extra="forbid")
 
     preset: Literal["rigid"] = "rigid"
-    youngs_modulus: float = Field(1.0e6, gt=0, description="Young's modulus E in Pa (only sets the contact stiffness)")
+    density: float = Field(1000.0, gt=0, description="density in kg/m^3")
 
 
 class Fracture(_Elastic):

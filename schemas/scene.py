@@ -1,8 +1,11 @@
 """scene.yaml: the user-facing description of one scene.
 
-Units: metres, seconds, kilograms, pascals, degrees. Regions live in an
-object's own normalised box, [0,1]^3 over its bounding box at rest (x right,
-y down, z away from the camera). Every path is relative to the scene folder.
+Units: metres, seconds, kilograms, pascals, degrees. Condition vectors and
+regions are read in the gravity-aligned frame (x the picture's right made
+horizontal, y down along gravity, z horizontal away from the camera) unless a
+condition says `frame: camera`. Regions live in an object's own normalised
+box, [0,1]^3 over its bounding box at rest in that frame. Every path is
+relative to the scene folder.
 """
 from __future__ import annotations
 
@@ -114,6 +117,10 @@ Region = Annotated[Union[Literal["all"], BoxRegion, SphereRegion], BeforeValidat
 class _Condition(_Strict):
     object: int = Field(0, ge=0, description="index into objects")
     region: Region = Field("all", description=REGION_FORMS)
+    frame: Literal["gravity", "camera"] = Field(
+        "gravity", description="frame of the vector and the region box. gravity: x the picture's right made "
+        "horizontal, y down along gravity, z horizontal away from the camera (the camera frame when the camera "
+        "is level); camera: x right, y down, z along the camera's view")
 
 
 class _Windowed(_Condition):
@@ -162,7 +169,9 @@ class PhysicsConfig(_Strict):
     grid: int = Field(64, ge=8, le=512, description="grid cells along the longest side of the domain")
     particles_per_cell: int = Field(8, ge=1, le=64, description="interior fill density")
     ground: GroundConfig = GroundConfig()
-    walls: bool = Field(False, description="close the domain with slip walls")
+    walls: bool = Field(False, description="close the domain with slip walls a quarter of the objects' size "
+                        "around them; without walls only the ground stops anything, and what leaves the "
+                        "simulation grid flies on freely")
     dt: Optional[float] = Field(None, gt=0, description="substep in seconds; null: from the CFL bound")
     conditions: List[Condition] = Field(default_factory=list, description="impulses, forces, torques, fixed regions")
 

@@ -1,9 +1,11 @@
 """The scene's conditions (impulse, velocity, force, torque, fixed) acting on particles.
 
 Regions are decided once, at rest, in the object's normalised box [0,1]^3
-over its rest bounding box in the world frame (x right, y down, z away from
-the camera). Vectors from the scene are world-frame and are turned into the
-simulation frame with Q. Semantics (DESIGN.md):
+over its rest bounding box in the condition's frame: the gravity-aligned one
+(x the picture's right made horizontal, y down along gravity, z horizontal
+away from the camera; domain.gravity_frame) unless the condition says
+`frame: camera` (x right, y down, z away from the camera). Vectors are read in
+the same frame and turned into the simulation frame. Semantics (DESIGN.md):
   impulse   v_p += dv once, at the first substep starting at or after start_s
   velocity  v_p = v during [start_s, end_s) (mpm.grid_to_particle's override)
   fixed     v_p = 0 during the window
@@ -22,7 +24,7 @@ from schemas import InputError
 
 
 def region_members(region, positions: np.ndarray) -> np.ndarray:
-    """Boolean (N,) membership of an object's rest positions (N,3) in a scene region."""
+    """Boolean (N,) membership of an object's rest positions (N,3, in the condition's frame) in a scene region."""
     lo, hi = positions.min(axis=0), positions.max(axis=0)
     u = (positions - lo) / np.maximum(hi - lo, 1e-12)  # normalised box coordinates
     if region == "all":
@@ -80,6 +82,11 @@ class _Active:
     members_wp: wp.array
     mass: float  # region mass, kg
     rest_centre: wp.vec3  # region centre of mass at rest, simulation frame: a well-conditioned reference point
+    to_sim: np.ndarray  # (3,3) the condition's frame -> simulation frame
+
+    def sim(self, vector) -> wp.vec3:
+        """A vector of the condition (in its frame) in the simulation frame."""
+        return wp.vec3(*(self.to_sim @ np.asarray(vector, np.float64)).astype(np.float32))
 
 
 class Conditions:
@@ -91,6 +98,7 @@ class Conditions:
         object_id: (P,) object of each particle.
         masses: (P,) kg.
         Q: (3,3) world -> simulation rotation.
+        gravity_frame: (3,3) rows: the gravity-aligned axes in the world frame (domain.gravity_frame).
         scene_file: named in the error when a region holds no particle.
 
     Raises:
@@ -98,13 +106,14 @@ class Conditions:
     """
 
     def __init__(self, conditions, rest_world: np.ndarray, object_id: np.ndarray, masses: np.ndarray,
-                 Q: np.ndarray, device: str, scene_file="scene.yaml"):
-        self.Q, self.device, self.n = Q, device, len(masses)
+                 Q: np.ndarray, gravity_frame: np.ndarray, device: str, scene_file="scene.yaml"):
+        self.device, self.n = device, len(masses)
         self.masses = masses
         self.items: list[_Active] = []
         for i, c in enumerate(conditions):
+            to_frame = np.eye(3) if c.frame == "camera" else gravity_frame  # world -> the condition's frame
             obj = np.flatnonzero(object_id == c.object)
-            idx = obj[region_members(c.region, rest_world[obj])]
+            idx = obj[region_members(c.region, rest_world[obj] @ to_frame.T)]
             if len(idx) == 0:
                 raise InputError(scene_file, f"physics.conditions[{i}].region",
                                  f"the region holds no particle of object {c.object}",
@@ -112,19 +121,23 @@ class Conditions:
             m = masses[idx].astype(np.float64)
             centre = Q @ (m @ rest_world[idx] / m.sum())
             self.items.append(_Active(c, idx, wp.array(idx.astype(np.int32), dtype=wp.int32, device=device),
-                                      float(m.sum()), wp.vec3(*centre.astype(np.float32))))
+                                      float(m.sum()), wp.vec3(*centre.astype(np.float32)), Q @ to_frame.T))
         self._applied_impulses: set[int] = set()
         self._active_key: tuple | None = None
         self._base_force = wp.zeros(self.n, dtype=wp.vec3, device=device)
         self._moments = wp.zeros(10, dtype=float, device=device)
 
-    def sim(self, vector) -> wp.vec3:
-        """A world-frame scene vector in the simulation frame."""
-        return wp.vec3(*(self.Q @ np.asarray(vector, np.float64)).astype(np.float32))
-
     @staticmethod
     def _in_window(c, t: float) -> bool:
         return c.start_s <= t and (c.end_s is None or t < c.end_s)
+
+    def fixed_at_start(self) -> np.ndarray:
+        """Boolean (P,) of the particles a `fixed` condition holds at t = 0."""
+        held = np.zeros(self.n, bool)
+        for item in self.items:
+            if item.condition.type == "fixed" and self._in_window(item.condition, 0.0):
+                held[item.members] = True
+        return held
 
     def before_substep(self, t: float, solver) -> None:
         """Apply what is due at time t (s), the start of the next substep."""
@@ -132,7 +145,7 @@ class Conditions:
             c = item.condition
             if c.type == "impulse" and i not in self._applied_impulses and t >= c.start_s:
                 wp.launch(add_velocity, dim=len(item.members), device=self.device,
-                          inputs=[item.members_wp, self.sim(c.velocity), solver.v])
+                          inputs=[item.members_wp, item.sim(c.velocity), solver.v])
                 self._applied_impulses.add(i)
         active = tuple(i for i, item in enumerate(self.items)
                        if item.condition.type != "impulse" and self._in_window(item.condition, t))
@@ -148,7 +161,7 @@ class Conditions:
                           inputs=[item.members_wp, solver.x, solver.mass, item.rest_centre, self._moments])
                 wp.launch(add_torque_forces, dim=len(item.members), device=self.device,
                           inputs=[item.members_wp, solver.x, solver.mass, item.rest_centre, self._moments,
-                                  self.sim(item.condition.torque), solver.force])
+                                  item.sim(item.condition.torque), solver.force])
 
     def _upload_windows(self, active: tuple, solver) -> None:
         """Rebuild prescribed velocities and constant forces when a window opens or closes."""
@@ -160,10 +173,10 @@ class Conditions:
             c = item.condition
             if c.type in ("velocity", "fixed"):
                 prescribed[item.members] = 1
-                velocity[item.members] = self.Q @ np.asarray(c.velocity) if c.type == "velocity" else 0.0
+                velocity[item.members] = item.to_sim @ np.asarray(c.velocity) if c.type == "velocity" else 0.0
             elif c.type == "force":
                 share = self.masses[item.members, None] / item.mass
-                force[item.members] += share * (self.Q @ np.asarray(c.force))[None, :]
+                force[item.members] += share * (item.to_sim @ np.asarray(c.force))[None, :]
         solver.prescribed.assign(prescribed)
         solver.prescribed_velocity.assign(velocity)
         self._base_force.assign(force)

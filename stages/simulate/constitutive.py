@@ -63,8 +63,8 @@ def material_params(material) -> MaterialParams:
     p = MaterialParams()
     p.kind = PRESETS.index(material.preset)
     p.neo_hookean = int(getattr(material, "model", "") == "neo_hookean")
-    p.mu, p.lam = lame_parameters(material.youngs_modulus, material.poisson_ratio)
-    p.youngs_modulus = material.youngs_modulus
+    p.youngs_modulus = getattr(material, "youngs_modulus", 0.0)  # rigid: none
+    p.mu, p.lam = lame_parameters(p.youngs_modulus, getattr(material, "poisson_ratio", 0.0))
     p.yield_stress = getattr(material, "yield_stress", 0.0)
     p.hardening = getattr(material, "hardening", 0.0)
     p.softening = getattr(material, "softening", 0.0)
@@ -78,7 +78,10 @@ def material_params(material) -> MaterialParams:
 
 
 def wave_speed(material) -> float:
-    """Largest elastic (P-)wave speed sqrt((lambda + 2 mu) / rho) in m/s, for the CFL bound."""
+    """Largest elastic (P-)wave speed sqrt((lambda + 2 mu) / rho) in m/s, for the CFL bound; 0 for rigid
+    bodies, whose particles follow one rigid motion and carry no wave."""
+    if material.preset == "rigid":
+        return 0.0
     mu, lam = lame_parameters(material.youngs_modulus, material.poisson_ratio)
     stiffening = SNOW_HARDENING_MAX if material.preset == "snow" else 1.0
     return math.sqrt(stiffening * (lam + 2.0 * mu) / material.density)

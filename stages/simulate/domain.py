@@ -3,6 +3,11 @@
 World = the input camera frame (x right, y down, z forward). The simulation
 runs in a rotated copy of it, x_sim = Q x_world, whose +y points *up*
 (against gravity), so the ground is a grid plane and walls are grid faces.
+
+Condition vectors and regions are read in the gravity-aligned frame unless a
+condition says `frame: camera`: x the picture's right made horizontal, y down
+along gravity, z horizontal away from the camera (`gravity_frame`); with a
+level camera it is the camera frame.
 """
 from __future__ import annotations
 
@@ -53,8 +58,14 @@ def down_direction(gravity_world: np.ndarray, pitch_deg: float) -> np.ndarray:
     return world_gravity(None, pitch_deg) / STANDARD_GRAVITY
 
 
+def gravity_frame(Q: np.ndarray) -> np.ndarray:
+    """Rotation (3,3) whose rows are the gravity-aligned axes in the world frame: x the simulation's
+    (the picture's right, horizontal), y down, z = x cross y (horizontal, away from the camera)."""
+    return np.diag([1.0, -1.0, -1.0]) @ Q
+
+
 def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: float, velocities: np.ndarray,
-             ground: bool, walls: bool) -> Grid:
+             ground_y: float | None, walls: bool) -> Grid:
     """Grid over the rest particles plus room for the motion expected in `duration_s`.
 
     Args:
@@ -62,13 +73,15 @@ def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: fl
         cells: grid cells along the longest side of the domain (physics.grid).
         gravity: |g|, m/s^2.
         velocities: (N,3) velocities the conditions give (simulation frame), m/s.
-        ground: the ground is the lowest rest point; nothing goes below it.
+        ground_y: height of the ground plane (simulation frame, m; at or above the lowest rest
+            point, rest_state.support_height), or None without a ground.
         walls: close the domain tightly around the objects.
 
     Each side gets room for the travel of the conditions' velocities toward
     it, between half and twice the objects' size (a quarter above and for
-    walls), so a wild condition cannot dilute the resolution; what would leave
-    the domain stops at its walls (mpm.grid_to_particle).
+    walls), so a wild condition cannot dilute the resolution. The grid is not
+    a wall: it follows the particles (mpm.MPMSolver.follow), unless `walls`.
+    The ground lies exactly on a node plane.
     """
     lo, hi = rest_sim.min(axis=0), rest_sim.max(axis=0)
     size = float(max(hi - lo))
@@ -80,14 +93,15 @@ def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: fl
     rise = travel_hi[1] ** 2 / (2.0 * gravity * duration_s ** 2) if gravity > 0 else travel_hi[1]
     margin_hi[1] = np.clip(0.25 * size + rise, 0.25 * size, 2.0 * size)
     fall = 0.5 * gravity * duration_s ** 2 + travel_lo[1]
-    margin_lo[1] = 0.0 if ground else np.clip(0.25 * size + fall, 0.25 * size, 2.0 * size)
+    margin_lo[1] = 0.0 if ground_y is not None else np.clip(0.25 * size + fall, 0.25 * size, 2.0 * size)
     if walls:
         margin_lo[[0, 2]] = margin_hi[[0, 2]] = 0.25 * size
     extent = (hi - lo) + margin_lo + margin_hi
     dx = float(max(extent)) / cells
-    # the ground (or the domain floor) lies exactly on node plane BOUNDARY_NODES
     origin = lo - margin_lo - BOUNDARY_NODES * dx
-    shape = np.ceil(extent / dx).astype(int) + 2 * BOUNDARY_NODES + 1
+    if ground_y is not None:  # the ground on a node plane, the points below it (its contact patch) on the grid
+        origin[1] = ground_y - (BOUNDARY_NODES + math.ceil((ground_y - lo[1]) / dx - 1e-9)) * dx
+    shape = np.ceil((hi + margin_hi - origin) / dx - 1e-9).astype(int) + BOUNDARY_NODES + 1
     return Grid(origin=tuple(float(o) for o in origin), dx=dx, shape=tuple(int(n) for n in shape))
 
 

@@ -6,7 +6,8 @@ All quantities live in the *simulation frame*: metres, with gravity along -y
 One substep, one kernel per physical step:
   particle_to_grid   scatter mass and APIC momentum plus stress and external forces
   grid_update        momentum -> velocity, gravity, ground and wall conditions
-  grid_to_particle   gather velocity and its gradient C, advect, F <- (I + dt C) F
+  grid_to_particle   gather velocity and its gradient C, advect, F <- (I + dt C) F;
+                     particles off the grid fly freely (ballistic, ground contact only)
   rigid projection   (rigid.py) rigid objects follow one rigid motion
   update_stress      (constitutive.py) return mapping and Kirchhoff stress
 
@@ -16,6 +17,15 @@ each range into its own grid copy (momentum and mass together, one vec4 per
 node) so the copies never race, and the grid update sums them. The grid
 update visits only the box of nodes that the particles' stencils touch
 (`stencil_node_box`), which is also all it needs to clear for the next P2G.
+
+The grid is no wall. Between frames it moves by whole cells to keep the
+particles inside it (`follow`): MLS-MPM keeps no state on the grid from one
+substep to the next, so only the origin changes. A particle that still leaves
+it (the bodies spread wider than the grid, or `walls` is off and one outruns
+a frame) is `free`: it stops scattering to the grid and moves under gravity,
+its forces and the ground alone, with its deformation frozen, until it comes
+back onto the grid. Only the ground and the walls a scene asks for stop
+anything; with walls the grid stays where it is and its faces are the walls.
 """
 from __future__ import annotations
 
@@ -47,11 +57,11 @@ class Grid:
 
 @dataclass(frozen=True)
 class Ground:
-    """Ground plane y = ground_node * dx (+ origin) with its contact law."""
+    """Ground plane y = height (simulation frame, m; on a node plane of the grid) with its contact law."""
 
     kind: int = GROUND_NONE  # GROUND_NONE | GROUND_STICKY | GROUND_SLIP | GROUND_FRICTION
     friction: float = 0.0  # Coulomb coefficient (GROUND_FRICTION)
-    ground_node: int = BOUNDARY_NODES
+    height: float | None = None  # None: node plane BOUNDARY_NODES of the grid the solver starts on
 
 
 @wp.func
@@ -86,13 +96,19 @@ def particle_to_grid(
     dx: float,
     dt: float,
     shape: wp.vec3i,
+    free: wp.array(dtype=wp.int32),
     grid_momentum_mass: wp.array4d(dtype=wp.vec4),
 ):
     """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
 
     Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4.
+    Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
     """
     p = wp.tid() + start
+    if free[p] == 1:
+        return
+    if free[p] == 2:
+        free[p] = 0
     inv_dx = 1.0 / dx
     base, fx = stencil_base(x[p], origin, inv_dx, shape)
     wx = quadratic_weights(fx[0])
@@ -123,10 +139,13 @@ def stencil_node_box(
     origin: wp.vec3,
     dx: float,
     shape: wp.vec3i,
+    free: wp.array(dtype=wp.int32),
     corners: wp.array(dtype=wp.int32),
 ):
-    """Smallest (corners[0:3]) and largest (corners[3:6]) stencil corner node of all particles per axis."""
+    """Smallest (corners[0:3]) and largest (corners[3:6]) stencil corner node of the particles on the grid."""
     p = wp.tid()
+    if free[p] != 0:
+        return
     base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
     for a in range(3):
         wp.atomic_min(corners, a, base[a])
@@ -168,14 +187,21 @@ def grid_update(
     n_parts: int,
     gravity: wp.vec3,
     dt: float,
+    damping: float,
     shape: wp.vec3i,
     ground_kind: int,
     ground_node: int,
     friction: float,
+    walls: int,
+    keep_unsupported: int,
     grid_momentum_mass: wp.array4d(dtype=wp.vec4),
     grid_velocity: wp.array3d(dtype=wp.vec3),
+    unsupported_velocity: wp.array3d(dtype=wp.vec3),
 ):
-    """v_i = (sum of momenta) / (sum of masses) + dt g, then ground and walls; clears the P2G copies."""
+    """v_i = (sum of momenta) / (sum of masses) + dt g, then ground and walls (walls != 0); clears the P2G copies.
+
+    With keep_unsupported, the velocity before the ground's contact law is kept as well: rigid
+    bodies meet the ground as whole bodies (rigid.py), not node by node."""
     i, j, k = wp.tid()
     i += offset[0]
     j += offset[1]
@@ -187,30 +213,64 @@ def grid_update(
     m = total[3]
     v = wp.vec3(0.0)
     if m > 0.0:
-        v = wp.vec3(total[0], total[1], total[2]) / m + dt * gravity
+        v = (wp.vec3(total[0], total[1], total[2]) / m + dt * gravity) / (1.0 + dt * damping)
+        if walls != 0:
+            v = wall_slip(v, wp.vec3i(i, j, k), shape)
+        if keep_unsupported != 0:
+            unsupported_velocity[i, j, k] = v
         if ground_kind != GROUND_NONE and j <= ground_node:
             v = ground_contact(v, ground_kind, friction)
-        v = wall_slip(v, wp.vec3i(i, j, k), shape)
+    elif keep_unsupported != 0:
+        unsupported_velocity[i, j, k] = v
     grid_velocity[i, j, k] = v
+
+
+@wp.func
+def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_faces: wp.vec3i, margin: float):
+    """Whether x lies at least `margin` cells inside the wall layer of every open face (closed faces
+    keep particles in by themselves), so that its stencil is on the grid."""
+    xg = (x - origin) / dx
+    inside = True
+    for a in range(3):
+        if closed_faces[a] == 0 and xg[a] < float(BOUNDARY_NODES) + margin:
+            inside = False
+        if closed_faces[a] < 2 and xg[a] > float(shape[a] - 1 - BOUNDARY_NODES) - margin:
+            inside = False
+    return inside
 
 
 @wp.kernel
 def grid_to_particle(
     start: int,
     grid_velocity: wp.array3d(dtype=wp.vec3),
+    unsupported_velocity: wp.array3d(dtype=wp.vec3),
+    own_ground: wp.array(dtype=wp.int32),
     origin: wp.vec3,
     dx: float,
     dt: float,
     shape: wp.vec3i,
+    closed_faces: wp.vec3i,
     prescribed: wp.array(dtype=wp.int32),
     prescribed_velocity: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.int32),
     x: wp.array(dtype=wp.vec3),
     v: wp.array(dtype=wp.vec3),
     C: wp.array(dtype=wp.mat33),
     F: wp.array(dtype=wp.mat33),
 ):
-    """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p."""
+    """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
+
+    closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is closed
+    (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall layer.
+    Particles of bodies that meet the ground themselves (own_ground, rigid) gather the velocity
+    before the ground's contact law.
+    """
     p = wp.tid() + start
+    if free[p] != 0:
+        return  # free_flight moves it, or it joins the grid at the next P2G
+    grid = grid_velocity
+    if own_ground[p] != 0:
+        grid = unsupported_velocity
     inv_dx = 1.0 / dx
     base, fx = stencil_base(x[p], origin, inv_dx, shape)
     wx = quadratic_weights(fx[0])
@@ -234,7 +294,7 @@ def grid_to_particle(
             v_ij = wp.vec3(0.0)  # sum over k of wz v
             vz_ij = wp.vec3(0.0)  # ... of oz v
             for k in range(3):
-                vi = grid_velocity[base[0] + i, base[1] + j, base[2] + k]
+                vi = grid[base[0] + i, base[1] + j, base[2] + k]
                 v_ij += wz[k] * vi
                 vz_ij += oz[k] * vi
             v_i += wy[j] * v_ij
@@ -247,18 +307,61 @@ def grid_to_particle(
     Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
     if prescribed[p] != 0:
         vp = prescribed_velocity[p]  # velocity and fixed conditions override the grid
-    # keep particles off the wall layer so every stencil stays on the grid
+    # a closed face keeps particles off its wall layer; through an open one they leave the grid
     lo = float(BOUNDARY_NODES) * dx
     xp = x[p] + dt * vp - origin
-    xp = wp.vec3(
-        wp.clamp(xp[0], lo, float(shape[0] - 1) * dx - lo),
-        wp.clamp(xp[1], lo, float(shape[1] - 1) * dx - lo),
-        wp.clamp(xp[2], lo, float(shape[2] - 1) * dx - lo),
-    )
+    for a in range(3):
+        if closed_faces[a] >= 1:
+            xp[a] = wp.max(xp[a], lo)
+        if closed_faces[a] == 2:
+            xp[a] = wp.min(xp[a], float(shape[a] - 1) * dx - lo)
     x[p] = xp + origin
     v[p] = vp
     C[p] = Cp
     F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * F[p]
+    if not on_grid(x[p], origin, dx, shape, closed_faces, 0.0):
+        free[p] = 1
+        C[p] = wp.mat33(0.0)
+
+
+@wp.kernel
+def free_flight(
+    start: int,
+    gravity: wp.vec3,
+    dt: float,
+    origin: wp.vec3,
+    dx: float,
+    shape: wp.vec3i,
+    closed_faces: wp.vec3i,
+    ground_kind: int,
+    ground_node: int,
+    friction: float,
+    mass: wp.array(dtype=float),
+    force: wp.array(dtype=wp.vec3),
+    prescribed: wp.array(dtype=wp.int32),
+    prescribed_velocity: wp.array(dtype=wp.vec3),
+    free: wp.array(dtype=wp.int32),
+    x: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+):
+    """Particles off the grid: v += dt (g + f / m), x += dt v (symplectic Euler, as on the grid), the
+    ground's contact law below its plane, F frozen. A particle a cell back inside the grid is marked to
+    rejoin it (free = 2) at the next P2G."""
+    p = wp.tid() + start
+    if free[p] != 1:
+        return
+    vp = v[p] + dt * (gravity + force[p] / mass[p])
+    if prescribed[p] != 0:
+        vp = prescribed_velocity[p]
+    xp = x[p] + dt * vp
+    ground_y = origin[1] + float(ground_node) * dx
+    if ground_kind != GROUND_NONE and xp[1] <= ground_y:
+        vp = ground_contact(vp, ground_kind, friction)
+        xp = wp.vec3(xp[0], ground_y, xp[2])
+    x[p] = xp
+    v[p] = vp
+    if on_grid(xp, origin, dx, shape, closed_faces, 1.0):
+        free[p] = 2
 
 
 class MPMSolver:
@@ -267,15 +370,21 @@ class MPMSolver:
     Particles (P of them, simulation frame): `x` (P,3) m, `v` (P,3) m/s, `C`
     (P,3,3) 1/s, `F` (P,3,3) elastic deformation gradient, `history` (P,)
     material history scalar, `mass` (P,) kg, `volume` (P,) m^3, `object_id`
-    (P,). Conditions write `force` (P,3) N, `prescribed` (P,) flags and
-    `prescribed_velocity` (P,3) m/s; `rigid` (rigid.RigidBodies or None)
-    projects rigid objects after G2P.
+    (P,), `free` (P,) flags of the particles off the grid. Conditions write
+    `force` (P,3) N, `prescribed` (P,) flags and `prescribed_velocity` (P,3)
+    m/s; `rigid` (rigid.RigidBodies or None) projects rigid objects after G2P.
+    `damping` (1/s) slows every grid velocity, v <- v / (1 + dt damping): 0 in
+    a run, set only while the body settles into its rest state (simulation.py).
+
+    Args:
+        walls: the domain's faces are slip walls; else only the ground (if any) closes it.
     """
 
     def __init__(self, grid: Grid, positions: np.ndarray, masses: np.ndarray, volumes: np.ndarray,
                  object_id: np.ndarray, materials: list, gravity: np.ndarray, ground: Ground,
-                 device: str = "cpu", n_parts: int | None = None):
-        self.grid, self.ground, self.device = grid, ground, device
+                 walls: bool = False, device: str = "cpu", n_parts: int | None = None):
+        self.grid, self.ground, self.walls, self.device = grid, ground, bool(walls), device
+        self.damping = 0.0
         self.gravity = wp.vec3(*np.asarray(gravity, dtype=np.float32))
         n = len(positions)
         self.n_particles = n
@@ -292,19 +401,25 @@ class MPMSolver:
         self.mass = wp.array(np.asarray(masses, np.float32), dtype=float, device=device)
         self.volume = wp.array(np.asarray(volumes, np.float32), dtype=float, device=device)
         self.object_id = wp.array(np.asarray(object_id, np.int32), dtype=wp.int32, device=device)
-        history = np.array([initial_history(m) for m in materials], np.float32)[np.asarray(object_id)]
-        self.history = wp.array(history, dtype=float, device=device)
+        self._history0 = np.array([initial_history(m) for m in materials], np.float32)[np.asarray(object_id)]
+        self.history = wp.array(self._history0, dtype=float, device=device)
         self.force = wp.zeros(n, dtype=wp.vec3, device=device)
         self.prescribed = wp.zeros(n, dtype=wp.int32, device=device)
         self.prescribed_velocity = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.free = wp.zeros(n, dtype=wp.int32, device=device)
+        self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
         self.materials = params_array(materials, device)
         self.rigid = None
 
         nx, ny, nz = grid.shape
         self.grid_momentum_mass = wp.zeros((self.n_parts, nx, ny, nz), dtype=wp.vec4, device=device)
         self.grid_velocity = wp.zeros((nx, ny, nz), dtype=wp.vec3, device=device)
-        self._origin = wp.vec3(*np.asarray(grid.origin, np.float32))
+        self.unsupported_velocity = self.grid_velocity  # its own array once rigid bodies are attached
         self._shape = wp.vec3i(nx, ny, nz)
+        self.ground_height = grid.origin[1] + BOUNDARY_NODES * grid.dx if ground.height is None else ground.height
+        # the grid never reaches below where it starts: the ground (if any) stays on it
+        self._lowest_origin = grid.origin[1]
+        self._move_to(np.asarray(grid.origin, np.float64))
         # particle ranges, one per thread
         self._ranges = _split(n, self.n_parts)
         self._pool = ThreadPoolExecutor(self.n_parts) if self.n_parts > 1 else None
@@ -349,7 +464,7 @@ class MPMSolver:
             return np.zeros(3, int), shape
         self._corners.assign(self._no_corners)
         wp.launch(stencil_node_box, dim=self.n_particles, device=self.device,
-                  inputs=[self.x, self._origin, self.grid.dx, self._shape, self._corners])
+                  inputs=[self.x, self._origin, self.grid.dx, self._shape, self.free, self._corners])
         corners = self._corners.numpy()
         return corners[:3].astype(int), corners[3:].astype(int) + 3
 
@@ -358,25 +473,93 @@ class MPMSolver:
         g, dev = self.grid, self.device
         self._per_particle((particle_to_grid, lambda s, part: [
             s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.grid_momentum_mass]))
+            self._origin, g.dx, dt, self._shape, self.free, self.grid_momentum_mass]))
         lo, hi = self._active_nodes()
-        self._parallel([
-            (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
-                wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape, self.ground.kind,
-                self.ground.ground_node, self.ground.friction, self.grid_momentum_mass, self.grid_velocity]))
-            for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
-        ])
+        if np.all(hi > lo):  # else every particle is off the grid
+            self._parallel([
+                (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
+                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self.damping, self._shape,
+                    self.ground.kind, self._ground_node, self.ground.friction, int(self.walls),
+                    int(self.rigid is not None), self.grid_momentum_mass, self.grid_velocity,
+                    self.unsupported_velocity]))
+                for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
+            ])
         g2p = (grid_to_particle, lambda s, part: [
-            s, self.grid_velocity, self._origin, g.dx, dt, self._shape, self.prescribed,
-            self.prescribed_velocity, self.x, self.v, self.C, self.F])
+            s, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx, dt, self._shape,
+            self._closed_faces, self.prescribed,
+            self.prescribed_velocity, self.free, self.x, self.v, self.C, self.F])
+        flight = (free_flight, lambda s, part: [
+            s, self.gravity, dt, self._origin, g.dx, self._shape, self._closed_faces, self.ground.kind,
+            self._ground_node, self.ground.friction, self.mass, self.force, self.prescribed,
+            self.prescribed_velocity, self.free, self.x, self.v])
         stress = (update_stress, lambda s, part: [
             s, self.materials, self.object_id, self.volume, dt, self.F, self.history, self.volume_stress])
         if self.rigid is None:
-            self._per_particle(g2p, stress)
+            self._per_particle(flight, g2p, stress)
         else:  # the rigid projection gathers every rigid particle's G2P velocity first
-            self._per_particle(g2p)
+            self._per_particle(flight, g2p)
             self.rigid.project(self, dt)
             self._per_particle(stress)
+
+    def attach_rigid(self, rigid) -> None:
+        """Let a rigid.RigidBodies move its members after G2P; they meet the ground as whole bodies."""
+        self.rigid = rigid
+        self.unsupported_velocity = wp.zeros_like(self.grid_velocity)
+        flags = np.zeros(self.n_particles, np.int32)
+        flags[rigid.members.numpy()] = 1
+        self.own_ground.assign(flags)
+
+    def reset(self, positions: np.ndarray, keep: np.ndarray) -> None:
+        """Put every particle back at `positions` (P,3), at rest and on the grid; the `keep` (P,) bool
+        particles keep their F, history and stress, the others start unstrained."""
+        keep = np.asarray(keep, bool)
+        self.x.assign(np.asarray(positions, np.float32))
+        for state in (self.v, self.C, self.free, self.prescribed, self.prescribed_velocity, self.force):
+            state.zero_()
+        eye = np.eye(3, dtype=np.float32)
+        self.F.assign(np.where(keep[:, None, None], self.F.numpy(), eye))
+        self.history.assign(np.where(keep, self.history.numpy(), self._history0))
+        self.volume_stress.assign(np.where(keep[:, None, None], self.volume_stress.numpy(), 0.0).astype(np.float32))
+
+    def _move_to(self, origin: np.ndarray) -> None:
+        """Put the grid's node (0, 0, 0) at `origin` (3,) m; the ground stays on its node plane."""
+        self.grid = Grid(origin=tuple(float(o) for o in origin), dx=self.grid.dx, shape=self.grid.shape)
+        self._origin = wp.vec3(*origin.astype(np.float32))
+        self._ground_node = int(round((self.ground_height - origin[1]) / self.grid.dx))
+        on_floor = self.ground.kind != GROUND_NONE and self._ground_node >= BOUNDARY_NODES
+        self._closed_faces = wp.vec3i(2, 2, 2) if self.walls else wp.vec3i(0, int(on_floor), 0)
+
+    def follow(self, margin: int) -> None:
+        """Move the grid by whole cells so that every particle lies `margin` cells inside its wall layer.
+
+        Where the particles spread wider than that allows, the grid centres on their centre of mass
+        along that axis and the outliers fly freely. It never moves below where it started (the
+        ground), and never with walls, which are its faces.
+        """
+        if self.walls:
+            return
+        x = self.x.numpy().astype(np.float64)
+        if not np.isfinite(x).all():
+            return  # blown up: the caller's check says so at the end of the frame
+        dx, shape = self.grid.dx, np.asarray(self.grid.shape)
+        origin = np.asarray(self.grid.origin)
+        inner = BOUNDARY_NODES + margin  # cells from a face to the nearest allowed particle
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        fits = (hi - lo) <= (shape - 1 - 2 * inner) * dx
+        low_shift = np.floor((lo - origin) / dx - inner)  # cells the grid may move up and keep lo inside
+        high_shift = np.ceil((hi - origin) / dx - (shape - 1 - inner))  # cells it must move to hold hi
+        centre = self.mass.numpy() @ x / float(np.sum(self.mass.numpy()))
+        centred = np.round((centre - origin) / dx - (shape - 1) / 2)
+        shift = np.where(fits, np.where(high_shift > 0, high_shift, np.minimum(low_shift, 0)), centred)
+        new = origin + shift * dx
+        if self.ground.kind != GROUND_NONE:
+            new[1] = max(new[1], self._lowest_origin)
+        if np.any(new != origin):
+            self._move_to(new)
+
+    def n_free(self) -> int:
+        """Particles off the grid now."""
+        return int(np.count_nonzero(self.free.numpy() == 1))
 
     def close(self) -> None:
         if self._pool is not None:

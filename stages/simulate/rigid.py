@@ -1,19 +1,34 @@
 """Rigid objects: after G2P, each rigid object's particles take the one rigid motion
-that has their total linear and angular momentum.
+that has their total linear and angular momentum, and the ground pushes on the
+body as a whole.
 
 Per substep, per rigid body b with rest centre of mass, rest offsets r0_p and
 rest inertia I0 (all in the simulation frame):
   P = sum m_p v_p,  L = sum m_p (R r0_p) x v_p          (momenta gathered from the grid)
   V = P / M,  omega = (R I0 R^T)^-1 L
+  ground: an impulse at the centre of pressure (below)
   c += dt V,  R <- exp(dt omega) R
   x_p = c + R r0_p,  v_p = V + omega x (x_p - c),  C_p = [omega]x,  F_p = R
-so the shape never changes (no strain), while contacts and conditions still
-act through the grid momentum.
+so the shape never changes (no strain), while contacts with other objects and
+the conditions act through the grid momentum.
+
+The ground is not applied node by node to rigid particles (mpm.grid_update
+keeps their velocities from before it): zeroing the nodes under the contact
+patch puts the reaction at the patch's centroid, not under the centre of mass,
+and rocks a body that stands still. A plane's pressure on a body sums to one
+force at the centre of pressure, which lies in the support (the contact
+points' extent on the ground) as near as it can to below the centre of mass:
+there the impulse that stops the body's approach leaves a body at rest at
+rest, and one whose centre of mass is beyond its support tips over its edge.
+Friction acts at the same point by Coulomb's law (sticky: no sliding; slip:
+none), so a ball rolls.
 """
 from __future__ import annotations
 
 import numpy as np
 import warp as wp
+
+from .mpm import GROUND_FRICTION, GROUND_NONE, GROUND_SLIP
 
 
 @wp.kernel
@@ -23,13 +38,18 @@ def gather_rigid_momentum(
     rest_offset: wp.array(dtype=wp.vec3),
     orientation: wp.array(dtype=wp.quat),
     mass: wp.array(dtype=float),
+    x: wp.array(dtype=wp.vec3),
     v: wp.array(dtype=wp.vec3),
+    ground_y: float,
+    contact_height: float,
     linear: wp.array(dtype=wp.vec3),
     angular: wp.array(dtype=wp.vec3),
     lowest: wp.array(dtype=float),
+    support: wp.array2d(dtype=float),
 ):
-    """Sum each body's linear momentum (kg m/s), angular momentum about its centre (kg m^2/s)
-    and find its lowest point below the centre (m)."""
+    """Sum each body's linear momentum (kg m/s), angular momentum about its centre (kg m^2/s), find its
+    lowest point below the centre (m) and the extent of its points within contact_height of the
+    ground (support[b] = min x, min z, -max x, -max z, m)."""
     i = wp.tid()
     p = members[i]
     b = body[i]
@@ -38,13 +58,34 @@ def gather_rigid_momentum(
     wp.atomic_add(linear, b, momentum)
     wp.atomic_add(angular, b, wp.cross(offset, momentum))
     wp.atomic_min(lowest, b, offset[1])
+    if x[p][1] <= ground_y + contact_height:
+        wp.atomic_min(support, b, 0, x[p][0])
+        wp.atomic_min(support, b, 1, x[p][2])
+        wp.atomic_min(support, b, 2, -x[p][0])
+        wp.atomic_min(support, b, 3, -x[p][2])
+
+
+@wp.func
+def impulse_response(r: wp.vec3, d: wp.vec3, inv_mass: float, inv_inertia: wp.mat33):
+    """Velocity change along d at offset r from the centre per unit impulse along d (1/kg)."""
+    return inv_mass + wp.dot(d, wp.cross(inv_inertia * wp.cross(r, d), r))
+
+
+@wp.func
+def push_at(r: wp.vec3, j: wp.vec3, inv_mass: float, inv_inertia: wp.mat33, V: wp.vec3, omega: wp.vec3):
+    """Linear and angular velocity after an impulse j (kg m/s) at offset r from the centre."""
+    return V + inv_mass * j, omega + inv_inertia * wp.cross(r, j)
 
 
 @wp.kernel
 def integrate_rigid_bodies(
     dt: float,
+    ground_kind: int,
+    friction: float,
     ground_y: float,
+    floor: wp.array(dtype=float),
     lowest: wp.array(dtype=float),
+    support: wp.array2d(dtype=float),
     total_mass: wp.array(dtype=float),
     rest_inertia: wp.array(dtype=wp.mat33),
     linear: wp.array(dtype=wp.vec3),
@@ -54,26 +95,50 @@ def integrate_rigid_bodies(
     velocity: wp.array(dtype=wp.vec3),
     spin: wp.array(dtype=wp.vec3),
 ):
-    """Velocities from momenta, then advance centre and orientation; clears the momentum sums.
+    """Velocities from momenta, the ground's impulse, then advance centre and orientation; clears the sums.
 
-    The ground zeroes only the grid nodes under the body, so the averaged
-    velocity still sinks it a little each step; a body that would reach below
-    ground_y (sim frame, m) is lifted back onto it instead.
+    A body whose lowest point would still reach below its floor (sim frame, m: the ground, or its
+    lowest rest point where the ground was laid above it, rest_state.support_height) is lifted
+    back onto it.
     """
     b = wp.tid()
     R = wp.quat_to_matrix(orientation[b])
-    V = linear[b] / total_mass[b]
-    sink = ground_y - (centre[b][1] + lowest[b] + dt * V[1])
+    inv_mass = 1.0 / total_mass[b]
+    inv_inertia = wp.inverse(R * rest_inertia[b] * wp.transpose(R))
+    V = linear[b] * inv_mass
+    omega = inv_inertia * angular[b]
+    c = centre[b]
+    if ground_kind != GROUND_NONE and support[b, 0] < 1.0e29:
+        # centre of pressure: below the centre of mass, clamped into the support's extent
+        pressure = wp.vec3(wp.clamp(c[0], support[b, 0], -support[b, 2]), ground_y,
+                           wp.clamp(c[2], support[b, 1], -support[b, 3]))
+        r = pressure - c
+        up = wp.vec3(0.0, 1.0, 0.0)
+        approach = wp.dot(V + wp.cross(omega, r), up)
+        if approach < 0.0:
+            normal = -approach / impulse_response(r, up, inv_mass, inv_inertia)
+            V, omega = push_at(r, normal * up, inv_mass, inv_inertia, V, omega)
+            slide = V + wp.cross(omega, r)
+            slide = wp.vec3(slide[0], 0.0, slide[2])
+            speed = wp.length(slide)
+            if ground_kind != GROUND_SLIP and speed > 0.0:
+                along = slide / speed
+                stop = speed / impulse_response(r, along, inv_mass, inv_inertia)  # impulse that stops sliding
+                if ground_kind == GROUND_FRICTION:
+                    stop = wp.min(stop, friction * normal)
+                V, omega = push_at(r, -stop * along, inv_mass, inv_inertia, V, omega)
+    sink = floor[b] - (c[1] + lowest[b] + dt * V[1])
     if sink > 0.0:
         V = wp.vec3(V[0], wp.max(V[1], 0.0), V[2])
-        centre[b] = centre[b] + wp.vec3(0.0, sink, 0.0)
+        c = c + wp.vec3(0.0, sink, 0.0)
     lowest[b] = 1.0e30
-    omega = wp.inverse(R * rest_inertia[b] * wp.transpose(R)) * angular[b]
+    for a in range(4):
+        support[b, a] = 1.0e30
     angle = wp.length(omega) * dt
     if angle > 0.0:
         turn = wp.quat_from_axis_angle(wp.normalize(omega), angle)
         orientation[b] = wp.normalize(turn * orientation[b])
-    centre[b] = centre[b] + dt * V
+    centre[b] = c + dt * V
     velocity[b] = V
     spin[b] = omega
     linear[b] = wp.vec3(0.0)
@@ -115,12 +180,15 @@ class RigidBodies:
         masses: (P,) kg.
         object_id: (P,) object of each particle.
         rigid_objects: indices of the objects whose material is rigid.
-        ground_y: height of the ground in the simulation frame, m (-inf: no ground).
+        ground: the mpm.Ground (contact law, friction, and its height: None, no ground).
+        contact_height: points this close above the ground (m) are in contact with it.
     """
 
     def __init__(self, rest_positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray,
-                 rigid_objects: list[int], ground_y: float, device: str):
-        members, bodies, offsets, centres, inertias, totals = [], [], [], [], [], []
+                 rigid_objects: list[int], ground, contact_height: float, device: str):
+        self.ground, self.contact_height = ground, float(contact_height)
+        ground_y = ground.height if ground.kind != GROUND_NONE and ground.height is not None else -1e30
+        members, bodies, offsets, centres, inertias, totals, floors = [], [], [], [], [], [], []
         for b, k in enumerate(rigid_objects):
             idx = np.flatnonzero(object_id == k)
             m = masses[idx].astype(np.float64)
@@ -133,6 +201,7 @@ class RigidBodies:
             centres.append(c)
             inertias.append(inertia)
             totals.append(m.sum())
+            floors.append(min(float(ground_y), float(rest_positions[idx, 1].min())))
         n = len(rigid_objects)
         self.n_members = int(sum(len(i) for i in members))
         self.members = wp.array(np.concatenate(members).astype(np.int32), dtype=wp.int32, device=device)
@@ -147,18 +216,21 @@ class RigidBodies:
         self.linear = wp.zeros(n, dtype=wp.vec3, device=device)
         self.angular = wp.zeros(n, dtype=wp.vec3, device=device)
         self.lowest = wp.array(np.full(n, 1e30, np.float32), dtype=float, device=device)
-        self.ground_y = max(float(ground_y), -1e30)
+        self.floor = wp.array(np.array(floors, np.float32), dtype=float, device=device)
+        self.support = wp.array(np.full((n, 4), 1e30, np.float32), dtype=float, device=device)
+        self._ground_y = float(ground_y)
         self.device = device
 
     def project(self, solver, dt: float) -> None:
         """Replace the rigid objects' particle motion after G2P by their rigid motion."""
         n, dev = self.n_members, self.device
         wp.launch(gather_rigid_momentum, dim=n, device=dev, inputs=[
-            self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.v,
-            self.linear, self.angular, self.lowest])
+            self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.x, solver.v,
+            self._ground_y, self.contact_height, self.linear, self.angular, self.lowest, self.support])
         wp.launch(integrate_rigid_bodies, dim=len(self.total_mass), device=dev, inputs=[
-            dt, self.ground_y, self.lowest, self.total_mass, self.rest_inertia, self.linear, self.angular,
-            self.centre, self.orientation, self.velocity, self.spin])
+            dt, self.ground.kind, self.ground.friction, self._ground_y, self.floor, self.lowest, self.support,
+            self.total_mass, self.rest_inertia, self.linear, self.angular, self.centre, self.orientation,
+            self.velocity, self.spin])
         wp.launch(apply_rigid_motion, dim=n, device=dev, inputs=[
             self.members, self.body, self.rest_offset, self.centre, self.orientation, self.velocity, self.spin,
             solver.x, solver.v, solver.C, solver.F])

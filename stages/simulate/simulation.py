@@ -1,10 +1,12 @@
 """From Gaussians and a scene's physics to per-frame particle trajectories.
 
 `Simulation` builds the particles (the G Gaussians first, then each object's
-interior fill), the simulation frame and grid, the materials, conditions and
-rigid bodies, then `run` steps the MPM solver frame by frame with CFL substeps
-and records positions, the Gaussians' deformation gradients and diagnostics,
-all in the world (camera) frame.
+interior fill), the simulation frame, the ground under the objects' centres of
+mass and the grid, the materials, conditions and rigid bodies; `run` first
+settles the deformable bodies into the stress that holds their photographed
+shape up (rest_state.py), then steps the MPM solver frame by frame with CFL
+substeps and records positions, the Gaussians' deformation gradients and
+diagnostics, all in the world (camera) frame.
 """
 from __future__ import annotations
 
@@ -20,11 +22,11 @@ from schemas import InputError
 from schemas.artifacts import TrajectoriesArtifact
 from schemas.materials import PRESETS
 
-from . import domain
+from . import domain, rest_state
 from .conditions import Conditions
 from .constitutive import elastic_energy, wave_speed
 from .fill import fill_object
-from .mpm import BOUNDARY_NODES, GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
+from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
 from .rigid import RigidBodies
 
 log = logging.getLogger("physmotion.simulate")
@@ -33,6 +35,8 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
+# The grid follows the particles with this many free cells inside its wall layers.
+FOLLOW_MARGIN_CELLS = 2
 
 
 class Simulation:
@@ -62,16 +66,17 @@ class Simulation:
                                  "check the object's mask or box and rerun pm-reconstruct")
         self.gravity_world = domain.world_gravity(physics.gravity, pitch_deg)
         self.Q = domain.simulation_rotation(domain.down_direction(self.gravity_world, pitch_deg))
+        self.gravity_frame = domain.gravity_frame(self.Q)
         g = float(np.linalg.norm(self.gravity_world))
-        velocities = np.array([c.velocity for c in physics.conditions if c.type in ("impulse", "velocity")],
-                              dtype=np.float64).reshape(-1, 3)
+        velocities = np.array([self._condition_vector(c, c.velocity) for c in physics.conditions
+                               if c.type in ("impulse", "velocity")], dtype=np.float64).reshape(-1, 3)
         self.speed_hint = float(np.max(np.linalg.norm(velocities, axis=1), initial=0.0))
-        fit = dict(gravity=g, duration_s=physics.duration_s, velocities=velocities @ self.Q.T,
-                   ground=physics.ground.enabled, walls=physics.walls)
+        ground = physics.ground
+        fit = dict(gravity=g, duration_s=physics.duration_s, velocities=velocities @ self.Q.T, walls=physics.walls)
 
         # the cell size comes from the Gaussians; the final grid also covers the fill
         means_sim = means @ self.Q.T
-        dx = domain.fit_grid(means_sim, physics.grid, **fit).dx
+        dx = domain.fit_grid(means_sim, physics.grid, ground_y=None, **fit).dx
         fills, gauss_volume = [], np.zeros(len(means))
         for k in range(len(self.materials)):
             sel = object_id == k
@@ -90,25 +95,53 @@ class Simulation:
 
         rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
-        self.grid = domain.fit_grid(rest_sim, physics.grid, **fit)
-        ground = physics.ground
-        self.ground = Ground(GROUND_TYPES[ground.type] if ground.enabled else GROUND_NONE, ground.friction)
-        self.ground_y = self.grid.origin[1] + BOUNDARY_NODES * self.grid.dx  # sim frame height of the ground
+        # the ground: the plane, normal to gravity, on which the objects stand as photographed
+        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, margin=dx)
+                         if ground.enabled else None)
+        self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, **fit)
+        self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
+                       if ground.enabled else Ground(GROUND_NONE))
+        # potential energy is measured from the ground, else from the grid's starting floor
+        self._height_zero = self.ground_y if ground.enabled else self.grid.origin[1]
         self.solver = MPMSolver(self.grid, rest_sim, self.masses, self.volumes, self.object_id, self.materials,
-                                self.Q @ self.gravity_world, self.ground, device=device)
+                                self.Q @ self.gravity_world, self.ground, walls=physics.walls, device=device)
         rigid = [k for k, m in enumerate(self.materials) if m.preset == "rigid"]
-        if rigid:
-            self.solver.rigid = RigidBodies(rest_sim, self.masses, self.object_id, rigid,
-                                            self.ground_y if ground.enabled else -math.inf, device)
+        if rigid:  # points within half a lattice spacing of the ground touch it
+            spacing = dx / max(1, round(physics.particles_per_cell ** (1 / 3)))
+            self.solver.attach_rigid(RigidBodies(rest_sim, self.masses, self.object_id, rigid, self.ground,
+                                                 0.5 * spacing, device))
         self.conditions = Conditions(physics.conditions, self.rest_world, self.object_id, self.masses, self.Q,
-                                     device, scene_file)
+                                     self.gravity_frame, device, scene_file)
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
-        self._warned_walls = False
+        self._free_logged = 0
+        self._rest_F_inverse = np.eye(3)  # settle() sets the Gaussians' F of the loaded rest state
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
         log.info("%d particles (%d Gaussians + %d fill), grid %s of %.1f mm cells, %d frames",
                  len(self.masses), self.n_gaussians, len(self.masses) - self.n_gaussians,
                  "x".join(map(str, self.grid.shape)), 1e3 * self.grid.dx, self.n_frames)
+        self._log_bodies(rest_sim)
+
+    def _condition_vector(self, condition, vector) -> np.ndarray:
+        """A condition's vector in the world (camera) frame: it is written in the gravity-aligned frame
+        unless the condition says `frame: camera`."""
+        vector = np.asarray(vector, np.float64)
+        return vector if condition.frame == "camera" else self.gravity_frame.T @ vector
+
+    def _log_bodies(self, rest_sim: np.ndarray) -> None:
+        """Each object's mass, volume and principal moments of inertia about its centre of mass."""
+        for k, material in enumerate(self.materials):
+            sel = self.object_id == k
+            m, x = self.masses[sel], rest_sim[sel]
+            r = x - m @ x / m.sum()
+            inertia = np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r)
+            moments = np.linalg.eigvalsh(inertia)
+            log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
+                     material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
+        if self.ground_y is not None:
+            sunk = float(self.ground_y - rest_sim[:, 1].min())
+            log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
+                     1e3 * sunk)
 
     def substep_size(self, max_speed: float) -> float:
         """physics.dt, or the CFL substep for particles up to max_speed (m/s) plus a frame of free fall."""
@@ -116,6 +149,44 @@ class Simulation:
             return self.physics.dt
         fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
         return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall)
+
+    def settle(self) -> None:
+        """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
+
+        The bodies that touch the ground or are held by a `fixed` condition at t = 0 sink into
+        their own weight with critical damping; all others are held still meanwhile (they are
+        in flight and carry no load). Then every particle goes back to its rest position and
+        rest, keeping the elastic F and history of the settled bodies.
+        """
+        s = self.solver
+        rest_sim = self.rest_world @ self.Q.T
+        held = self.conditions.fixed_at_start()
+        loaded = {int(k) for k in np.unique(self.object_id[held])}
+        if self.ground_y is not None:
+            loaded |= {int(k) for k in np.unique(self.object_id[rest_sim[:, 1] <= self.ground_y + self.grid.dx])}
+        deformable = sorted(k for k in loaded if self.materials[k].preset != "rigid")
+        heights = [float(np.ptp(rest_sim[self.object_id == k, 1])) for k in deformable]
+        duration, damping = rest_state.settle_plan([self.materials[k] for k in deformable], heights)
+        if duration == 0.0:
+            return
+        still = held | ~np.isin(self.object_id, deformable)
+        s.prescribed.assign(still.astype(np.int32))
+        s.prescribed_velocity.zero_()
+        s.damping = damping
+        # the CFL bound even under a physics.dt: a dt that blows the run up is reported by the run itself
+        fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
+        dt = domain.cfl_substep(self.grid.dx, self.materials, self.speed_hint + fall)
+        n = max(1, math.ceil(duration / dt))
+        started = time.perf_counter()
+        for _ in range(n):
+            s.substep(duration / n)
+        s.damping = 0.0
+        sag = float(np.max(rest_sim[:, 1] - s.x.numpy()[:, 1]))
+        s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
+        self._rest_F_inverse = np.linalg.inv(s.F.numpy()[: self.n_gaussians].astype(np.float64))
+        log.info("settled objects %s into their weight: %d substeps over %.3f s (damping %.0f /s), largest sag "
+                 "%.2f mm, taken as the photographed shape's load (%.0f s)", deformable, n, duration, damping,
+                 1e3 * sag, time.perf_counter() - started)
 
     def run(self) -> TrajectoriesArtifact:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
@@ -125,13 +196,17 @@ class Simulation:
         diag = {k: np.zeros((T,) + s) for k, s in [("kinetic_energy", ()), ("potential_energy", ()), ("momentum", (3,)),
                                                    ("angular_momentum", (3,)), ("max_speed", ()), ("substeps", ())]}
         times = np.arange(T) / self.physics.fps
+        self.settle()
         self._record(0, positions, F, diag)
         t, started = 0.0, time.perf_counter()
         for f in range(1, T):
             dt = self.substep_size(float(diag["max_speed"][f - 1]))
             n = max(1, math.ceil((times[f] - t) / dt - 1e-9))
             h = (times[f] - t) / n
-            for _ in range(n):
+            every = self._follow_every(float(diag["max_speed"][f - 1]), h)
+            for i in range(n):
+                if i % every == 0:
+                    self.solver.follow(FOLLOW_MARGIN_CELLS)
                 self.conditions.before_substep(t, self.solver)
                 self.solver.substep(h)
                 t += h
@@ -139,8 +214,9 @@ class Simulation:
             diag["substeps"][f] = n
             self._record(f, positions, F, diag)
             self._check(f, h, positions[f], diag["max_speed"][f])
-            log.info("frame %d/%d  t=%.3f s  %d substeps of %.2e s  max speed %.2f m/s  (%.0f s elapsed)",
-                     f, T - 1, t, n, h, diag["max_speed"][f], time.perf_counter() - started)
+            elapsed = time.perf_counter() - started
+            log.info("frame %d/%d  t=%.3f s  %d substeps of %.2e s  max speed %.2f m/s  (%.0f s elapsed, ~%.0f s "
+                     "left)", f, T - 1, t, n, h, diag["max_speed"][f], elapsed, elapsed / f * (T - 1 - f))
         self.solver.close()
         return TrajectoriesArtifact(
             rest_positions=self.rest_world, volumes=self.volumes, masses=self.masses, material_id=self.material_id,
@@ -154,33 +230,35 @@ class Simulation:
         v = s.v.numpy().astype(np.float64) @ self.Q  # world = Q^T sim, for row vectors
         x = x_sim @ self.Q
         positions[f] = x
-        F[f] = self.Q.T @ s.F.numpy()[: self.n_gaussians] @ self.Q
+        # the deformation since the photograph: the settled load's F is the rest state
+        F[f] = self.Q.T @ (s.F.numpy()[: self.n_gaussians] @ self._rest_F_inverse) @ self.Q
         m = self.masses
         wp.launch(elastic_energy, dim=len(m), device=self.device,
                   inputs=[s.materials, s.object_id, s.volume, s.F, s.history, self._energy])
-        height = x_sim[:, 1] - self.ground_y
+        height = x_sim[:, 1] - self._height_zero
         diag["kinetic_energy"][f] = 0.5 * np.sum(m * np.sum(v * v, axis=1))
         diag["potential_energy"][f] = (np.linalg.norm(self.gravity_world) * np.sum(m * height)
                                        + np.sum(self._energy.numpy(), dtype=np.float64))
         diag["momentum"][f] = m @ v
         diag["angular_momentum"][f] = m @ np.cross(x, v)
         diag["max_speed"][f] = np.sqrt(np.max(np.sum(v * v, axis=1))) if len(v) else 0.0
-        self._warn_at_walls(f, x_sim)
+        self._log_free(f)
 
-    def _warn_at_walls(self, f: int, x_sim: np.ndarray) -> None:
-        """Say once when particles reach the domain's edge (mpm.grid_to_particle holds them there)."""
-        g = self.grid
-        lo = np.asarray(g.origin) + BOUNDARY_NODES * g.dx
-        hi = np.asarray(g.origin) + (np.asarray(g.shape) - 1 - BOUNDARY_NODES) * g.dx
-        tol = 1e-3 * g.dx
-        at_low = x_sim <= lo + tol
-        at_low[:, 1] &= self.ground.kind == GROUND_NONE  # resting on the ground is not leaving the domain
-        n = int(np.count_nonzero(np.any(at_low | (x_sim >= hi - tol), axis=1)))
-        if n and not self._warned_walls:
-            self._warned_walls = True
-            log.warning("frame %d: %d particles reached the edge of the simulation domain and are held there; "
-                        "the objects travel farther than %.2f m from where they start (twice their size): "
-                        "shorten physics.duration_s or weaken the conditions", f, n, 2 * self._size)
+    def _follow_every(self, max_speed: float, h: float) -> int:
+        """Substeps between grid moves: no particle (up to the last frame's speed, what a condition may
+        give, and a frame of free fall) travels a cell in between."""
+        speed = max(max_speed, self.speed_hint) + float(np.linalg.norm(self.gravity_world)) / self.physics.fps
+        return max(1, int(self.grid.dx / (speed * h))) if speed > 0 else 1 << 30
+
+    def _log_free(self, f: int) -> None:
+        """Say when particles leave the grid (they fly on freely, mpm.free_flight) and how many."""
+        n = self.solver.n_free()
+        if n != self._free_logged and (n == 0 or abs(n - self._free_logged) >= 0.01 * len(self.masses)
+                                       or self._free_logged == 0):
+            log.info("frame %d: %d of %d particles are off the simulation grid (%.2f m around the objects) and fly "
+                     "freely: gravity, forces and the ground act on them, nothing else", f, n, len(self.masses),
+                     2 * self._size)
+            self._free_logged = n
 
     def _check(self, f: int, h: float, x: np.ndarray, max_speed: float) -> None:
         """Stop with a message naming the frame, the object and the likely fix when the run blew up."""

@@ -1,0 +1,82 @@
+"""Rest drift: a photographed object with no conditions must stay where it stands.
+
+    PYTHONPATH=. python benchmarks/rest.py results/ball results/coffee ... [--presets jelly rigid ...]
+
+Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
+scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
+otherwise. The object is simulated under the scene's camera, ground and
+duration with every condition removed, once per preset (the preset's
+defaults, the scene's density). Printed per run: the largest turn of the body
+over the run (degrees, best rigid fit of all particles), the largest
+horizontal travel of its centre of mass (mm and % of size_m), the largest
+sag of the centre of mass (mm), substeps and seconds.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+
+from schemas import load_scene
+from schemas import materials as M
+from schemas.artifacts import GaussiansArtifact, read_artifact
+from stages.simulate.simulation import Simulation
+
+PRESET_MODELS = {"jelly": M.Jelly, "metal": M.Metal, "sand": M.Sand, "plasticine": M.Plasticine, "foam": M.Foam,
+                 "snow": M.Snow, "rigid": M.Rigid, "fracture": M.Fracture}
+
+
+def turn_deg(rest: np.ndarray, now: np.ndarray, w: np.ndarray) -> float:
+    """Angle in degrees of the best rotation taking the weighted centred rest points (N,3) onto now (N,3)."""
+    a = rest - w @ rest / w.sum()
+    b = now - w @ now / w.sum()
+    U, _, Vt = np.linalg.svd((b * w[:, None]).T @ a)
+    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
+
+
+def drift(sim: Simulation, tr) -> dict:
+    """Largest turn (deg), horizontal centre-of-mass travel (m) and sag (m, + down) over the run."""
+    m = tr.masses
+    com = (m @ tr.positions) / m.sum()  # (T,3) world
+    d = (com - com[0]) @ sim.Q.T  # simulation frame: y up
+    turns = [turn_deg(tr.positions[0], tr.positions[f], m) for f in range(len(tr.time_s))]
+    return {"turn": max(turns), "travel": float(np.max(np.linalg.norm(d[:, [0, 2]], axis=1))),
+            "sag": float(np.max(-d[:, 1])), "substeps": int(tr.substeps.sum())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("results", nargs="+", type=Path, help="folders holding gaussians.h5")
+    parser.add_argument("--scenes-dir", type=Path, default=Path("scenes"))
+    parser.add_argument("--presets", nargs="+", default=["jelly", "metal", "rigid", "plasticine", "foam",
+                                                         "fracture", "sand", "snow"])
+    parser.add_argument("--duration", type=float, default=None, help="seconds (default: the scene's)")
+    args = parser.parse_args()
+    logging.basicConfig(level=logging.WARNING)
+    print("| scene | preset | turn (deg) | travel (mm) | travel (% size) | sag (mm) | substeps | s |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    for folder in args.results:
+        scene = load_scene(args.scenes_dir / folder.name / "scene.yaml")
+        g = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
+        physics = scene.physics.model_copy(update={"conditions": []})
+        if args.duration:
+            physics = physics.model_copy(update={"duration_s": args.duration})
+        size = scene.objects[0].size_m
+        for preset in args.presets:
+            materials = [PRESET_MODELS[preset](density=o.material.density) for o in scene.objects]
+            start = time.perf_counter()
+            sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
+                             scene_file=scene.file)
+            tr = sim.run()
+            r = drift(sim, tr)
+            print(f"| {folder.name} | {preset} | {r['turn']:.2f} | {1e3 * r['travel']:.2f} | "
+                  f"{100 * r['travel'] / size:.2f} | {1e3 * r['sag']:.2f} | {r['substeps']} | "
+                  f"{time.perf_counter() - start:.0f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

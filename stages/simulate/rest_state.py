@@ -1,0 +1,115 @@
+"""The photographed world at rest: where the ground is, and the stress the objects stand under.
+
+A photographed object is in equilibrium. Two things of its reconstruction
+break that if taken as they are:
+
+- Its lowest point is wherever the reconstruction's error put it (a ball's
+  closed back ends in a keel), so a ground through that point can hold the
+  centre of mass off its support and tip the body over. `support_height`
+  puts the ground plane at the lowest height at which each object resting on
+  it stands: the convex hull of its points at or below the plane (seen from
+  above) holds its centre of mass with a margin. The few points below the
+  plane stay where they are, inside the ground (they are its contact patch);
+  nothing is moved, so frame 0 is still the photograph.
+- Its shape is the loaded shape, but a simulation that starts from it with no
+  stress lets it fall into its own weight: it sags by twice its static
+  deflection, rings and, on a narrow support, rolls away. `settle` finds the
+  stress of the loaded state: the bodies sink under gravity with their
+  fundamental mode critically damped, and then every particle goes back to
+  its photographed place and rest, keeping its elastic deformation gradient
+  and material history. To first order in the deflection that stress holds
+  the photographed shape up against gravity, so at t = 0 the bodies are at
+  rest in the shape of the photograph.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from .constitutive import lame_parameters
+
+# The settle lasts this many periods of the slowest body's fundamental mode (critically damped, its
+# residual motion after two periods is e^(-4 pi) (1 + 4 pi) ~ 5e-5 of the sag).
+SETTLE_PERIODS = 2.0
+
+
+def _holds(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> bool:
+    """Whether the convex hull of points (N,2) holds centre (2,) at least `margin` inside its edges."""
+    if len(points_xz) < 3:
+        return False
+    try:
+        hull = ConvexHull(points_xz)
+    except QhullError:  # all on one line: no area to stand on
+        return False
+    # equations: n . p + offset <= 0 inside, unit n
+    return bool(np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -margin)
+
+
+def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float) -> float:
+    """Lowest plane height (m, +y up) at which one object (positions (N,3), masses (N,)) stands.
+
+    Binary search over the points' heights: the support grows with the plane. An object that
+    cannot stand with every point below the plane (its centre of mass outside its own outline
+    from above) stands on its lowest point, and falls over as it would.
+    """
+    centre = masses @ positions / masses.sum()
+    heights = np.sort(positions[:, 1])
+    order = np.argsort(positions[:, 1])
+    xz = positions[order][:, [0, 2]]
+    lo, hi = 0, len(heights) - 1
+    if not _holds(xz, centre[[0, 2]], margin):
+        return float(heights[0])
+    while lo < hi:  # smallest i whose lowest i + 1 points hold the centre
+        mid = (lo + hi) // 2
+        if _holds(xz[: mid + 1], centre[[0, 2]], margin):
+            hi = mid
+        else:
+            lo = mid + 1
+    return float(heights[lo])
+
+
+def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray, margin: float) -> float:
+    """Height of the ground plane (simulation frame, m): the lowest at which every object it touches stands.
+
+    Args:
+        positions: (P,3) rest positions, simulation frame (+y up), m.
+        masses: (P,) kg.
+        object_id: (P,) object of each particle.
+        margin: how far inside its support an object's centre of mass must lie, m.
+
+    The object with the lowest point touches the ground; any other object reaching below the
+    plane it needs touches it too, and the plane rises to what that one needs.
+    """
+    objects = np.unique(object_id)
+    lowest = {k: float(positions[object_id == k, 1].min()) for k in objects}
+    plane = min(lowest.values())
+    touching: set = set()
+    while True:
+        reach = {k for k in objects if lowest[k] <= plane} - touching
+        if not reach:
+            return plane
+        touching |= reach
+        plane = max([plane] + [standing_height(positions[object_id == k], masses[object_id == k], margin)
+                               for k in reach])
+
+
+def fundamental_period(material, height: float) -> float:
+    """Period in s of a body's slowest elastic mode, bounded above by a shear wave crossing its height
+    four times (a column on the ground: fixed below, free above)."""
+    mu, _ = lame_parameters(material.youngs_modulus, material.poisson_ratio)
+    return 4.0 * height / math.sqrt(mu / material.density)
+
+
+def settle_plan(materials: list, heights: list[float]) -> tuple[float, float]:
+    """(duration in s, damping in 1/s) of the settle for the deformable objects (materials and heights in m).
+
+    Damping c = 2 omega_1 makes the slowest fundamental critically damped; every other mode decays at
+    least as fast (mass-proportional damping takes e^(-c t / 2) off every mode).
+    """
+    periods = [fundamental_period(m, h) for m, h in zip(materials, heights)]
+    if not periods:
+        return 0.0, 0.0
+    period = max(periods)
+    return SETTLE_PERIODS * period, 2.0 * (2.0 * math.pi / period)
