@@ -125,7 +125,7 @@ def test_rigid_keeps_its_shape(device):
     sim, tr = simulate(device, dict(duration_s=0.4, fps=10, gravity=[0, G, 0], grid=24,
                             ground={"enabled": True, "type": "friction", "friction": 0.5},
                             conditions=[{"type": "impulse", "region": {"box": [0, 0, 0, 0.5, 1, 1]},
-                                         "velocity": [1.0, 1.0, 0.0]}]),
+                                         "velocity": [1.0, -1.0, 0.0]}]),  # half of it tossed up and right
                        [M.Rigid()], CUBE)
     for f in range(len(tr.time_s)):
         assert shape_error(tr.rest_positions, tr.positions[f]) < 0.01 * 0.1
