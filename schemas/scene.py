@@ -173,6 +173,8 @@ class PhysicsConfig(_Strict):
                         "around them; without walls only the ground stops anything, and what leaves the "
                         "simulation grid flies on freely")
     dt: Optional[float] = Field(None, gt=0, description="substep in seconds; null: from the CFL bound")
+    max_substeps_per_frame: int = Field(20000, ge=1, description="refuse a run whose CFL bound (stiffness, speed, "
+                                        "physics.dt) asks for more substeps per frame than this, before it starts")
     conditions: List[Condition] = Field(default_factory=list, description="impulses, forces, torques, fixed regions")
 
 

@@ -41,7 +41,8 @@ def simulate(args: argparse.Namespace) -> None:
     wp.config.quiet = not args.verbose
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     sim = Simulation(scene.physics, [o.material for o in scene.objects], gaussians.means, gaussians.object_id,
-                     pitch_deg=scene.camera.pitch_deg, scene_file=scene.file, device=device)
+                     pitch_deg=scene.camera.pitch_deg, silhouette=(gaussians.mask, gaussians.K),
+                     scene_file=scene.file, device=device)
     setup = args.out.parent / "setup.png"
     setup.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(setup), draw_setup(sim, gaussians.photo, gaussians.K))

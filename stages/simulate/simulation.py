@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import time
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from schemas.materials import PRESETS
 from . import domain, rest_state
 from .conditions import Conditions
 from .constitutive import elastic_energy, wave_speed
-from .fill import fill_object
+from .fill import fill_object, lattice_spacing, silhouette_gap
 from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
 from .rigid import RigidBodies
 
@@ -48,12 +49,15 @@ class Simulation:
         means: (G,3) Gaussian centres, world frame, m.
         object_id: (G,) object index k of each Gaussian.
         pitch_deg: camera.pitch_deg, turns the default gravity.
+        silhouette: (mask (H,W) u8 with k + 1 for object k, K (3,3)) of the photograph, world = its camera
+            frame: each object's solid grows to the mask's area (fill.silhouette_gap); None: the means'.
         scene_file: named in error messages.
         device: Warp device ("cpu", "cuda:0").
     """
 
     def __init__(self, physics, materials: list, means: np.ndarray, object_id: np.ndarray, *,
-                 pitch_deg: float = 0.0, scene_file: Path | str = "scene.yaml", device: str = "cpu"):
+                 pitch_deg: float = 0.0, silhouette: tuple | None = None, scene_file: Path | str = "scene.yaml",
+                 device: str = "cpu"):
         self.physics, self.materials, self.scene_file, self.device = physics, list(materials), scene_file, device
         means = np.asarray(means, np.float64)
         object_id = np.asarray(object_id, np.int64)
@@ -78,12 +82,19 @@ class Simulation:
         means_sim = means @ self.Q.T
         dx = domain.fit_grid(means_sim, physics.grid, ground_y=None, **fit).dx
         fills, gauss_volume = [], np.zeros(len(means))
+        spacing = lattice_spacing(dx, physics.particles_per_cell)
         for k in range(len(self.materials)):
             sel = object_id == k
             # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
             # lattice along the camera's axes meets a pitched ground with a staircase that lands on
             # one side first and spins the body (tests/simulate: a sphere on slip ground).
             fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell)
+            if silhouette is not None:  # grow the solid to the photographed silhouette
+                mask, K = silhouette
+                skin = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
+                fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell,
+                                                                   skin)
+                log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
             fills.append((fill @ self.Q, fill_volume, k))
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
@@ -107,7 +118,6 @@ class Simulation:
                                 self.Q @ self.gravity_world, self.ground, walls=physics.walls, device=device)
         rigid = [k for k, m in enumerate(self.materials) if m.preset == "rigid"]
         if rigid:  # points within half a lattice spacing of the ground touch it
-            spacing = dx / max(1, round(physics.particles_per_cell ** (1 / 3)))
             self.solver.attach_rigid(RigidBodies(rest_sim, self.masses, self.object_id, rigid, self.ground,
                                                  0.5 * spacing, device))
         self.conditions = Conditions(physics.conditions, self.rest_world, self.object_id, self.masses, self.Q,
@@ -121,6 +131,47 @@ class Simulation:
                  len(self.masses), self.n_gaussians, len(self.masses) - self.n_gaussians,
                  "x".join(map(str, self.grid.shape)), 1e3 * self.grid.dx, self.n_frames)
         self._log_bodies(rest_sim)
+        self._check_budget()
+
+    def _check_budget(self) -> None:
+        """Refuse, before any work, a run whose substeps or recorded frames cannot be afforded; log the estimate."""
+        physics = self.physics
+        per_frame = math.ceil(1.0 / (physics.fps * self.substep_size(0.0)) - 1e-9)
+        total = per_frame * (self.n_frames - 1)
+        if per_frame > physics.max_substeps_per_frame:
+            raise InputError(self.scene_file, self._substep_cause(),
+                             f"the CFL bound asks for {per_frame} substeps per frame ({total:.3g} in all) before "
+                             f"anything moves, above physics.max_substeps_per_frame = "
+                             f"{physics.max_substeps_per_frame}", self._substep_fix())
+        frames_bytes = 4 * 12 * self.n_frames * len(self.masses)  # positions and F, float32, every frame
+        available = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+        if frames_bytes > 0.5 * available:
+            raise InputError(self.scene_file, "physics.duration_s",
+                             f"{self.n_frames} frames of {len(self.masses)} particles need "
+                             f"{frames_bytes / 2 ** 30:.1f} GiB, more than half of this machine's "
+                             f"{available / 2 ** 30:.0f} GiB", "shorten physics.duration_s, lower physics.fps, or "
+                             "lower physics.particles_per_cell or physics.grid")
+        log.info("about %d substeps per frame at rest (%d in all; more while things move fast), %.2f GiB of frames",
+                 per_frame, total, frames_bytes / 2 ** 30)
+
+    def _substep_cause(self) -> str:
+        """The scene key that sets the substep: physics.dt, a condition's velocity, or the stiffest material."""
+        if self.physics.dt is not None:
+            return "physics.dt"
+        speeds = [wave_speed(m) for m in self.materials]
+        if self.speed_hint > max(speeds):
+            return "physics.conditions"
+        k = int(np.argmax(speeds))
+        return f"objects[{k}].material.youngs_modulus"
+
+    def _substep_fix(self) -> str:
+        cause = self._substep_cause()
+        if cause == "physics.dt":
+            return "raise physics.dt (or remove it to use the CFL bound)"
+        if cause == "physics.conditions":
+            return "lower the conditions' velocities"
+        return ("lower that youngs_modulus or raise its density (the elastic wave speed sqrt(E / density) sets "
+                "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
 
     def _condition_vector(self, condition, vector) -> np.ndarray:
         """A condition's vector in the world (camera) frame: it is written in the gravity-aligned frame
@@ -203,6 +254,11 @@ class Simulation:
             dt = self.substep_size(float(diag["max_speed"][f - 1]))
             n = max(1, math.ceil((times[f] - t) / dt - 1e-9))
             h = (times[f] - t) / n
+            if n > self.physics.max_substeps_per_frame:
+                raise InputError(self.scene_file, "physics.max_substeps_per_frame",
+                                 f"frame {f} would take {n} substeps: particles reached "
+                                 f"{diag['max_speed'][f - 1]:.3g} m/s", "soften the conditions or the impact, "
+                                 "or raise physics.max_substeps_per_frame if you mean it")
             every = self._follow_every(float(diag["max_speed"][f - 1]), h)
             for i in range(n):
                 if i % every == 0:
