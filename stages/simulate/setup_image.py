@@ -1,7 +1,8 @@
 """setup.png: what pm-simulate is about to do, drawn over the photograph.
 
 Each object's particles as dots in its own colour, the ground as a grid of
-lines on its plane, every condition's region (its particles, highlighted) and
+lines on its plane, the gravity-aligned axes the conditions are written in
+(x, y down, z), every condition's region (its particles, highlighted) and
 arrows for impulses, velocities, forces (direction) and torques (axis).
 """
 from __future__ import annotations
@@ -61,7 +62,21 @@ def draw_setup(sim, photo: np.ndarray, K: np.ndarray) -> np.ndarray:
         label = f"{i}:{c.type}" + (f" {c.start_s:g}s" if hasattr(c, "start_s") else "")
         cv2.putText(img, label, _pt(start + np.array([4.0, -4.0])), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
                     cv2.LINE_AA)
+    _draw_axes(img, K, sim.gravity_frame, x.mean(0), 0.35 * size)
     for k, m in enumerate(sim.materials):
         cv2.putText(img, f"object {k}: {m.preset}", (8, 16 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                     OBJECT_COLOURS[k % len(OBJECT_COLOURS)], 1, cv2.LINE_AA)
     return img
+
+
+AXIS_COLOURS = ((60, 60, 255), (60, 220, 60), (255, 140, 40))  # BGR: x red, y green, z blue
+
+
+def _draw_axes(img: np.ndarray, K: np.ndarray, frame: np.ndarray, origin: np.ndarray, length: float) -> None:
+    """The axes (rows of `frame`, world directions) from world point `origin`, `length` m long, labelled."""
+    start = _project(K, origin[None])[0]
+    for axis, name, colour in zip(frame, ("x", "y (down)", "z"), AXIS_COLOURS):
+        tip = _project(K, (origin + length * axis)[None])[0]
+        cv2.arrowedLine(img, _pt(start), _pt(tip), colour, 1, cv2.LINE_AA, tipLength=0.15)
+        cv2.putText(img, name, _pt(tip + np.array([3.0, 3.0])), cv2.FONT_HERSHEY_SIMPLEX, 0.4, colour, 1,
+                    cv2.LINE_AA)

@@ -1,0 +1,192 @@
+"""The photographed world: at rest until pushed, no invisible walls, directions that mean what they say.
+
+Small synthetic bodies (boxes of surface points) on grids of 16-24 cells. Each test names its reference:
+the rest state (nothing moves), an analytic motion (free fall, sliding, Coulomb), or a direction.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from schemas import materials as M
+from schemas.program import InputError
+from schemas.scene import PhysicsConfig
+from stages.simulate import rest_state
+from stages.simulate.simulation import Simulation
+from stages.simulate.synthetic import box_surface
+
+G = 9.81
+SIZE = 0.1
+
+
+def turn_deg(rest: np.ndarray, now: np.ndarray, w: np.ndarray) -> float:
+    """Angle (degrees) of the best rotation taking the weighted centred points rest (N,3) onto now (N,3)."""
+    a, b = rest - w @ rest / w.sum(), now - w @ now / w.sum()
+    return float(Rotation.align_vectors(b, a, weights=w)[0].magnitude() * 180 / math.pi)
+
+
+def centre_of_mass(tr) -> np.ndarray:
+    return (tr.masses @ tr.positions) / tr.masses.sum()
+
+
+def tilted_box(extent, tilt_deg: float, spacing: float = 0.01) -> np.ndarray:
+    """Surface points (N,3) of a box of `extent` (3,) m turned by tilt_deg about the camera's z axis."""
+    points = box_surface(np.zeros(3), np.asarray(extent, float), spacing)
+    points = points - points.mean(0)
+    return Rotation.from_euler("z", tilt_deg, degrees=True).apply(points) + np.array([0.0, 0.0, 0.5])
+
+
+def run(points, material, device, **physics):
+    sim = Simulation(PhysicsConfig(**{"grid": 20, "fps": 10, **physics}), [material], points,
+                     np.zeros(len(points), int), device=device)
+    return sim, sim.run()
+
+
+@pytest.mark.parametrize("material", [M.Jelly(youngs_modulus=5e4), M.Rigid(), M.Metal(), M.Plasticine(),
+                                      M.Foam(), M.Fracture()], ids=lambda m: m.preset)
+def test_a_body_standing_in_the_photograph_stays_there(device, material):
+    """With no conditions a box standing on one edge (turned 8 degrees, its lowest corner off its centre of
+    mass) turns less than 1 degree and moves less than 1 % of its size over 0.6 s on friction ground;
+    frame 0 is the photograph (the rest positions), and it sags no more than a column under its own
+    weight would: rho g H^2 / (2 E)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 8.0)
+    sim, tr = run(points, material, device, duration_s=0.6, ground={"type": "friction", "friction": 0.5})
+    np.testing.assert_array_equal(tr.positions[0], tr.rest_positions.astype(np.float32))
+    turns = [turn_deg(tr.positions[0], tr.positions[f], tr.masses) for f in range(len(tr.time_s))]
+    com = centre_of_mass(tr)
+    assert max(turns) < 1.0
+    assert np.max(np.linalg.norm((com - com[0])[:, [0, 2]], axis=1)) < 0.01 * SIZE
+    E = getattr(material, "youngs_modulus", math.inf)
+    assert np.max(com[:, 1] - com[0, 1]) <= material.density * G * SIZE ** 2 / (2 * E) + 1e-4
+
+
+def test_the_ground_is_laid_where_the_body_stands():
+    """rest_state.support_height on the cube turned 8 degrees (simulation frame, +y up): its bottom face rises
+    from the lowest edge at 8 degrees, so the plane must lie (|x_c - x_edge| + margin) tan 8 above that edge for
+    the points below it to reach `margin` past the centre of mass (tol: one point spacing along the face)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 8.0) * np.array([1.0, -1.0, 1.0])  # y up
+    masses = np.ones(len(points))
+    margin = 0.01
+    edge = points[np.argmin(points[:, 1])]
+    centre = points.mean(0)
+    expected = edge[1] + (abs(centre[0] - edge[0]) + margin) * math.tan(math.radians(8.0))
+    height = rest_state.support_height(points, masses, np.zeros(len(points), int), margin)
+    assert height == pytest.approx(expected, abs=0.01 * math.sin(math.radians(8.0)) + 1e-9)
+    # a body that cannot stand at all (its centre beyond its whole outline) is left on its lowest point
+    leaning = tilted_box((0.02, 0.08, 0.02), 30.0, spacing=0.005) * np.array([1.0, -1.0, 1.0])
+    assert rest_state.support_height(leaning, np.ones(len(leaning)), np.zeros(len(leaning), int), margin) == \
+        pytest.approx(leaning[:, 1].min())
+
+
+def test_once_pushed_it_slides_at_the_impulse_on_slip_ground(device):
+    """No glue: a horizontal impulse of 0.5 m/s slides the standing box at 0.5 m/s on slip ground (tol 5 %)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    sim, tr = run(points, M.Jelly(youngs_modulus=5e4), device, duration_s=0.3, ground={"type": "slip"},
+                  conditions=[{"type": "impulse", "velocity": [0.5, 0.0, 0.0]}])
+    travel = centre_of_mass(tr)[:, 0] - centre_of_mass(tr)[0, 0]
+    np.testing.assert_allclose(travel[1:], 0.5 * tr.time_s[1:], rtol=0.05)
+
+
+def test_tipped_past_its_balance_it_falls_over(device):
+    """A rigid column (2 x 8 x 2 cm) leaning 30 degrees has its centre of mass beyond its base: it falls over
+    (turns past 45 degrees within 0.8 s), while one leaning 5 degrees stands (under 1 degree)."""
+    falls = tilted_box((0.02, 0.08, 0.02), 30.0, spacing=0.005)
+    stands = tilted_box((0.02, 0.08, 0.02), 5.0, spacing=0.005)
+    turns = {}
+    for name, points in (("falls", falls), ("stands", stands)):
+        _, tr = run(points, M.Rigid(), device, duration_s=0.8, grid=24, ground={"type": "friction", "friction": 0.8})
+        turns[name] = turn_deg(tr.positions[0], tr.positions[-1], tr.masses)
+    assert turns["falls"] > 45.0
+    assert turns["stands"] < 1.0
+
+
+def test_a_fall_with_the_ground_off_follows_g_t2_over_2_for_a_whole_second(device):
+    """No invisible walls: the grid follows the body, so its centre of mass falls g t^2 / 2 at every frame of
+    a 1 s fall (4.9 m, fifty times its size; tol 1 %, which symplectic Euler's g t dt / 2 keeps for
+    substeps under a hundredth of the first frame)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    sim, tr = run(points, M.Jelly(), device, duration_s=1.0, grid=16, ground={"enabled": False}, gravity=[0, G, 0])
+    drop = centre_of_mass(tr)[:, 1] - centre_of_mass(tr)[0, 1]
+    np.testing.assert_allclose(drop[1:], 0.5 * G * tr.time_s[1:] ** 2, rtol=0.01)
+    assert sim.grid.shape == sim.solver.grid.shape  # the same grid, moved: memory stays bounded
+
+
+def test_a_body_thrown_out_of_the_picture_keeps_going_and_walls_stop_it(device):
+    """Thrown sideways at 2 m/s in zero gravity the box travels 2 m/s * t (tol 1 %); with physics.walls it stops
+    at the domain's face, a quarter of its size beyond where it started."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    kick = [{"type": "impulse", "velocity": [2.0, 0.0, 0.0]}]
+    _, tr = run(points, M.Jelly(youngs_modulus=2e4), device, duration_s=0.5, ground={"enabled": False},
+                gravity=[0, 0, 0], conditions=kick)
+    travel = centre_of_mass(tr)[:, 0] - centre_of_mass(tr)[0, 0]
+    np.testing.assert_allclose(travel[1:], 2.0 * tr.time_s[1:], rtol=0.01)
+    _, walled = run(points, M.Jelly(youngs_modulus=2e4), device, duration_s=0.5, ground={"enabled": False},
+                    gravity=[0, 0, 0], conditions=kick, walls=True)
+    assert walled.positions[-1][:, 0].max() - points[:, 0].max() < 0.3 * SIZE
+
+
+def test_particles_that_outrun_the_grid_fly_freely(device):
+    """Two halves of a box flying apart at 3 m/s each in zero gravity spread wider than any grid of their size:
+    the grid keeps to their centre of mass and the outer particles fly off it, ballistically (each half's
+    centre moves 3 m/s * t, tol 2 %), never held or reflected."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    split = [{"type": "velocity", "region": {"box": [0, 0, 0, 0.5, 1, 1]}, "velocity": [-3.0, 0, 0], "end_s": 0.02},
+             {"type": "velocity", "region": {"box": [0.5, 0, 0, 1, 1, 1]}, "velocity": [3.0, 0, 0], "end_s": 0.02}]
+    sim, tr = run(points, M.Fracture(youngs_modulus=2e4, critical_stretch=0.01, toughness=0.01), device,
+                  duration_s=0.4, ground={"enabled": False}, gravity=[0, 0, 0], conditions=split)
+    left = tr.rest_positions[:, 0] < tr.rest_positions[:, 0].mean()
+    for side, sign in ((left, -1.0), (~left, 1.0)):
+        x = tr.positions[:, side, 0] @ tr.masses[side] / tr.masses[side].sum()
+        later = tr.time_s > 0.1
+        speed = np.diff(x[later]) / np.diff(tr.time_s[later])
+        np.testing.assert_allclose(speed, sign * 3.0, rtol=0.02)
+    assert sim.solver.n_free() > 0
+
+
+def test_rigid_takes_fewer_substeps_than_jelly(device):
+    """A rigid body has no elastic wave: the same standing box thrown up takes no more substeps as rigid than as
+    jelly (E = 5e4 Pa), and falls back onto the ground as one."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    toss = [{"type": "impulse", "velocity": [0.0, -1.0, 0.0]}]
+    substeps = {}
+    for material in (M.Jelly(youngs_modulus=5e4), M.Rigid()):
+        _, tr = run(points, material, device, duration_s=0.4, conditions=toss)
+        substeps[material.preset] = tr.substeps.sum()
+    assert substeps["rigid"] <= substeps["jelly"] / 4
+
+
+def test_vectors_are_read_along_gravity_unless_the_condition_says_camera(device):
+    """Under a camera pitched 30 degrees, (0, -1, 0) in the default frame is straight up (momentum against
+    gravity, to 1e-4 of its size); with frame: camera it is the camera's up, 30 degrees from it."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    for frame, expected_deg in (("gravity", 0.0), ("camera", 30.0)):
+        sim = Simulation(PhysicsConfig(grid=16, fps=20, duration_s=0.05, ground={"enabled": False},
+                                       conditions=[{"type": "impulse", "velocity": [0, -1.0, 0], "frame": frame}]),
+                         [M.Rigid()], points, np.zeros(len(points), int), pitch_deg=30.0, device=device)
+        tr = sim.run()
+        p = tr.momentum[1] - tr.masses.sum() * sim.gravity_world * tr.time_s[1]  # less what gravity gave
+        up = -sim.gravity_world / np.linalg.norm(sim.gravity_world)
+        angle = math.degrees(math.acos(np.clip(p @ up / np.linalg.norm(p), -1, 1)))
+        assert angle == pytest.approx(expected_deg, abs=0.5)
+
+
+def test_a_force_accelerates_the_centre_of_mass_by_f_over_m(device):
+    """F = m a: 0.3 N on the whole box in zero gravity; its centre of mass moves a t^2 / 2 with a = F / M of the
+    simulated solid (tol 1 %)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    sim, tr = run(points, M.Jelly(youngs_modulus=5e4), device, duration_s=0.3, ground={"enabled": False},
+                  gravity=[0, 0, 0], conditions=[{"type": "force", "force": [0.3, 0, 0]}])
+    travel = centre_of_mass(tr)[:, 0] - centre_of_mass(tr)[0, 0]
+    np.testing.assert_allclose(travel[1:], 0.5 * 0.3 / tr.masses.sum() * tr.time_s[1:] ** 2, rtol=0.01)
+
+
+def test_a_run_beyond_its_substep_budget_is_refused_before_it_starts():
+    """E = 1e12 Pa would take over a million substeps a frame: refused at once, naming youngs_modulus."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    with pytest.raises(InputError, match=r"objects\[0\]\.material\.youngs_modulus.*substeps per frame"):
+        Simulation(PhysicsConfig(), [M.Jelly(youngs_modulus=1e12)], points, np.zeros(len(points), int))
+    with pytest.raises(InputError, match=r"physics\.duration_s.*GiB"):
+        Simulation(PhysicsConfig(duration_s=1e4, fps=240), [M.Jelly()], points, np.zeros(len(points), int))
