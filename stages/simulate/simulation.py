@@ -107,7 +107,7 @@ class Simulation:
         rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         # the ground: the plane, normal to gravity, on which the objects stand as photographed
-        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, margin=dx)
+        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, margin=spacing)
                          if ground.enabled else None)
         self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, **fit)
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
