@@ -70,7 +70,7 @@ def main() -> None:
             materials = [PRESET_MODELS[preset](density=o.material.density) for o in scene.objects]
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
-                             scene_file=scene.file)
+                             silhouette=(g.mask, g.K), scene_file=scene.file)
             tr = sim.run()
             r = drift(sim, tr)
             print(f"| {folder.name} | {preset} | {r['turn']:.2f} | {1e3 * r['travel']:.2f} | "
