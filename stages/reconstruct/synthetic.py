@@ -53,6 +53,29 @@ class Capsule:
         return np.stack([0.25 + 0.7 * stripes, 0.2 + 0.5 * np.clip(around, 0, 1), 0.8 - 0.6 * stripes], axis=-1)
 
 
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned box ``centre`` +- ``half`` (metres, (3,) each), facing the camera, in two colours."""
+
+    centre: np.ndarray
+    half: np.ndarray
+
+    @property
+    def size_m(self) -> float:
+        """Largest extent: the longest side."""
+        return 2 * float(np.max(self.half))
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (...,) in metres of points (...,3): negative inside."""
+        q = np.abs(points - self.centre) - self.half
+        return np.linalg.norm(np.maximum(q, 0.0), axis=-1) + np.minimum(np.max(q, axis=-1), 0.0)
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        """sRGB in [0,1] (...,3): a checker of 2 cm squares, so every face has texture."""
+        cells = np.floor((points - self.centre) / 0.02).astype(int).sum(axis=-1) % 2
+        return np.where(cells[..., None] == 0, [0.85, 0.45, 0.2], [0.3, 0.55, 0.8])
+
+
 @dataclass
 class Photograph:
     """What a camera sees of the capsule: RGB u8 (H,W,3) over a grey backdrop, mask (H,W) bool, and the
@@ -63,7 +86,7 @@ class Photograph:
     distance: np.ndarray
 
 
-def photograph(shape: Capsule, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,
+def photograph(shape: Capsule | Box, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,
                steps: int = 96) -> Photograph:
     """Ray-cast ``shape`` from the camera (pinhole, DESIGN.md conventions)."""
     rotation, translation = world_to_camera[:3, :3], world_to_camera[:3, 3]
@@ -78,7 +101,7 @@ def photograph(shape: Capsule, K: np.ndarray, world_to_camera: np.ndarray, width
     return Photograph((rgb * 255).round().astype(np.uint8), hit, np.where(hit, t, np.nan))
 
 
-def write_scene(folder: Path, shape: Capsule, fov_deg: float = 40.0, width: int = 256, height: int = 192,
+def write_scene(folder: Path, shape: Capsule | Box, fov_deg: float = 40.0, width: int = 256, height: int = 192,
                 iterations: int = 600) -> Path:
     """A scene folder (scene.yaml, photo.png, mask.png) of ``shape`` seen by the input camera; returns scene.yaml."""
     folder.mkdir(parents=True, exist_ok=True)

@@ -36,6 +36,8 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
+# The solid's silhouette is measured and grown at most this many times (each growth is whole lattice cells).
+SKIN_ITERATIONS = 3
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
 
@@ -91,9 +93,14 @@ class Simulation:
             fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell)
             if silhouette is not None:  # grow the solid to the photographed silhouette
                 mask, K = silhouette
-                skin = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
-                fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell,
-                                                                   skin)
+                skin = 0.0
+                for _ in range(SKIN_ITERATIONS):  # the growth is in whole lattice cells: measure again
+                    gap = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
+                    if gap < 0.5 * spacing:
+                        break
+                    skin += gap
+                    fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx,
+                                                                       physics.particles_per_cell, skin)
                 log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
             fills.append((fill @ self.Q, fill_volume, k))
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
