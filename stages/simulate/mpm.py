@@ -187,7 +187,6 @@ def grid_update(
     n_parts: int,
     gravity: wp.vec3,
     dt: float,
-    damping: float,
     shape: wp.vec3i,
     ground_kind: int,
     ground_node: int,
@@ -213,7 +212,7 @@ def grid_update(
     m = total[3]
     v = wp.vec3(0.0)
     if m > 0.0:
-        v = (wp.vec3(total[0], total[1], total[2]) / m + dt * gravity) / (1.0 + dt * damping)
+        v = wp.vec3(total[0], total[1], total[2]) / m + dt * gravity
         if walls != 0:
             v = wall_slip(v, wp.vec3i(i, j, k), shape)
         if keep_unsupported != 0:
@@ -373,8 +372,6 @@ class MPMSolver:
     (P,), `free` (P,) flags of the particles off the grid. Conditions write
     `force` (P,3) N, `prescribed` (P,) flags and `prescribed_velocity` (P,3)
     m/s; `rigid` (rigid.RigidBodies or None) projects rigid objects after G2P.
-    `damping` (1/s) slows every grid velocity, v <- v / (1 + dt damping): 0 in
-    a run, set only while the body settles into its rest state (simulation.py).
 
     Args:
         walls: the domain's faces are slip walls; else only the ground (if any) closes it.
@@ -384,7 +381,6 @@ class MPMSolver:
                  object_id: np.ndarray, materials: list, gravity: np.ndarray, ground: Ground,
                  walls: bool = False, device: str = "cpu", n_parts: int | None = None):
         self.grid, self.ground, self.walls, self.device = grid, ground, bool(walls), device
-        self.damping = 0.0
         self.gravity = wp.vec3(*np.asarray(gravity, dtype=np.float32))
         n = len(positions)
         self.n_particles = n
@@ -478,7 +474,7 @@ class MPMSolver:
         if np.all(hi > lo):  # else every particle is off the grid
             self._parallel([
                 (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
-                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self.damping, self._shape,
+                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape,
                     self.ground.kind, self._ground_node, self.ground.friction, int(self.walls),
                     int(self.rigid is not None), self.grid_momentum_mass, self.grid_velocity,
                     self.unsupported_velocity]))

@@ -14,11 +14,11 @@ break that if taken as they are:
   nothing is moved, so frame 0 is still the photograph.
 - Its shape is the loaded shape, but a simulation that starts from it with no
   stress lets it fall into its own weight: it sags by twice its static
-  deflection, rings and, on a narrow support, rolls away. `settle` finds the
-  stress of the loaded state: the bodies sink under gravity with their
-  fundamental mode critically damped, and then every particle goes back to
-  its photographed place and rest, keeping its elastic deformation gradient
-  and material history. To first order in the deflection that stress holds
+  deflection, rings and, on a narrow support, rocks or rolls away. The
+  settle (simulation.Simulation.settle, `Relaxation`) finds the stress of the
+  loaded state: the bodies sink under gravity by dynamic relaxation, and then
+  every particle goes back to its photographed place and rest, keeping its
+  elastic deformation gradient and material history. To first order in the deflection that stress holds
   the photographed shape up against gravity, so at t = 0 the bodies are at
   rest in the shape of the photograph.
 """
@@ -36,9 +36,10 @@ from .constitutive import lame_parameters
 # an object for it to stand. An object that needs more does not stand in the photograph (a capsule
 # leaning 20 degrees on one end needs 11 %): it falls as it would.
 MAX_SINK = 0.05
-# The settle lasts this many periods of the slowest body's fundamental mode (critically damped, its
-# residual motion after two periods is e^(-4 pi) (1 + 4 pi) ~ 5e-5 of the sag).
-SETTLE_PERIODS = 2.0
+# The settle stops once a kinetic energy peak is below this fraction of the first (the sag's), and
+# lasts at most this many periods of the slowest body's fundamental mode.
+RELAXED = 1.0e-4
+SETTLE_PERIODS = 10.0
 
 
 def _holds(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> bool:
@@ -108,14 +109,33 @@ def fundamental_period(material, height: float) -> float:
     return 4.0 * height / math.sqrt(mu / material.density)
 
 
-def settle_plan(materials: list, heights: list[float]) -> tuple[float, float]:
-    """(duration in s, damping in 1/s) of the settle for the deformable objects (materials and heights in m).
+class Relaxation:
+    """Dynamic relaxation by kinetic damping: run undamped, and whenever the kinetic energy has passed a
+    peak, stop every particle. At a peak each mode passes its equilibrium, so stopping there leaves it
+    at rest where it should be, whatever its period (the slow rocking of a soft body on a narrow
+    support included, which no one damping rate reaches in time).
 
-    Damping c = 2 omega_1 makes the slowest fundamental critically damped; every other mode decays at
-    least as fast (mass-proportional damping takes e^(-c t / 2) off every mode).
+    `step(solver)` after each substep returns True once a peak's energy is below RELAXED of the first.
     """
-    periods = [fundamental_period(m, h) for m, h in zip(materials, heights)]
-    if not periods:
-        return 0.0, 0.0
-    period = max(periods)
-    return SETTLE_PERIODS * period, 2.0 * (2.0 * math.pi / period)
+
+    def __init__(self, masses: np.ndarray):
+        self.masses = np.asarray(masses, np.float64)
+        self.first = self.previous = 0.0
+        self.rising = True
+        self.peaks = 0
+        self.residual = 1.0
+
+    def step(self, solver) -> bool:
+        v = solver.v.numpy().astype(np.float64)
+        energy = 0.5 * float(self.masses @ np.sum(v * v, axis=1))
+        if energy < self.previous and self.rising:  # just past a peak
+            self.peaks += 1
+            self.first = self.first or self.previous
+            self.residual = self.previous / self.first if self.first > 0 else 0.0
+            solver.v.zero_()
+            solver.C.zero_()
+            self.previous, self.rising = 0.0, True
+            return self.residual < RELAXED
+        self.rising = energy >= self.previous
+        self.previous = energy
+        return False

@@ -212,9 +212,10 @@ class Simulation:
         """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
 
         The bodies that touch the ground or are held by a `fixed` condition at t = 0 sink into
-        their own weight with critical damping; all others are held still meanwhile (they are
-        in flight and carry no load). Then every particle goes back to its rest position and
-        rest, keeping the elastic F and history of the settled bodies.
+        their own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation); all
+        others are held still meanwhile (they are in flight and carry no load). Then every
+        particle goes back to its rest position and rest, keeping the elastic F and history of
+        the settled bodies.
         """
         s = self.solver
         rest_sim = self.rest_world @ self.Q.T
@@ -223,28 +224,29 @@ class Simulation:
         if self.ground_y is not None:
             loaded |= {int(k) for k in np.unique(self.object_id[rest_sim[:, 1] <= self.ground_y + self.grid.dx])}
         deformable = sorted(k for k in loaded if self.materials[k].preset != "rigid")
-        heights = [float(np.ptp(rest_sim[self.object_id == k, 1])) for k in deformable]
-        duration, damping = rest_state.settle_plan([self.materials[k] for k in deformable], heights)
-        if duration == 0.0:
+        if not deformable:
             return
+        heights = [float(np.ptp(rest_sim[self.object_id == k, 1])) for k in deformable]
+        period = max(rest_state.fundamental_period(self.materials[k], h) for k, h in zip(deformable, heights))
         still = held | ~np.isin(self.object_id, deformable)
         s.prescribed.assign(still.astype(np.int32))
         s.prescribed_velocity.zero_()
-        s.damping = damping
         # the CFL bound even under a physics.dt: a dt that blows the run up is reported by the run itself
         fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
         dt = domain.cfl_substep(self.grid.dx, self.materials, self.speed_hint + fall)
-        n = max(1, math.ceil(duration / dt))
-        started = time.perf_counter()
-        for _ in range(n):
-            s.substep(duration / n)
-        s.damping = 0.0
+        relaxation = rest_state.Relaxation(self.masses)
+        started, steps = time.perf_counter(), 0
+        while steps * dt < rest_state.SETTLE_PERIODS * period:
+            s.substep(dt)
+            steps += 1
+            if relaxation.step(s):
+                break
         sag = float(np.max(rest_sim[:, 1] - s.x.numpy()[:, 1]))
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
         self._rest_F_inverse = np.linalg.inv(s.F.numpy()[: self.n_gaussians].astype(np.float64))
-        log.info("settled objects %s into their weight: %d substeps over %.3f s (damping %.0f /s), largest sag "
-                 "%.2f mm, taken as the photographed shape's load (%.0f s)", deformable, n, duration, damping,
-                 1e3 * sag, time.perf_counter() - started)
+        log.info("settled objects %s into their weight: %d substeps (%.3f s, %d kinetic peaks, the last %.1e of "
+                 "the first), largest sag %.2f mm, taken as the photographed shape's load (%.0f s)", deformable,
+                 steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, time.perf_counter() - started)
 
     def run(self) -> TrajectoriesArtifact:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
