@@ -1,6 +1,6 @@
 """Mass and inertia of the simulated solid of reconstructed synthetic shapes, against their analytic values.
 
-    PYTHONPATH=. python benchmarks/mass.py [--sizes 96 128 192] [--iterations 100]
+    python benchmarks/mass.py [--sizes 96 128 192] [--iterations 100]
 
 Each shape (a 12 cm ball, the 25 cm capsule tilted 20 degrees, a 14 x 9 x 9 cm box seen face on) is
 ray-cast by stages/reconstruct/synthetic.py at each photograph width, reconstructed by pm-reconstruct
@@ -13,17 +13,20 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from schemas import materials as M
-from schemas.artifacts import GaussiansArtifact, read_artifact
-from schemas.scene import PhysicsConfig
-from stages.reconstruct.cli import main as reconstruct
-from stages.reconstruct.synthetic import Box, Capsule, write_scene
-from stages.simulate.simulation import Simulation
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, before benchmarks/splat.py
+
+from schemas import materials as M  # noqa: E402
+from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
+from schemas.scene import PhysicsConfig  # noqa: E402
+from stages.reconstruct.cli import main as reconstruct  # noqa: E402
+from stages.reconstruct.synthetic import Box, Capsule, write_scene  # noqa: E402
+from stages.simulate.simulation import Simulation  # noqa: E402
 
 RHO = 1000.0
 
