@@ -130,7 +130,8 @@ class Simulation:
         self.conditions = Conditions(physics.conditions, self.rest_world, self.object_id, self.masses, self.Q,
                                      self.gravity_frame, device, scene_file)
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
-        self._free_logged = 0
+        self._free_logged = self._outside_logged = 0
+        self._camera = None if silhouette is None else (silhouette[1], silhouette[0].shape)  # K, (H, W)
         self._rest_F_inverse = np.eye(3)  # settle() sets the Gaussians' F of the loaded rest state
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
@@ -308,6 +309,21 @@ class Simulation:
         diag["angular_momentum"][f] = m @ np.cross(x, v)
         diag["max_speed"][f] = np.sqrt(np.max(np.sum(v * v, axis=1))) if len(v) else 0.0
         self._log_free(f)
+        self._log_outside_picture(f, x)
+
+    def _log_outside_picture(self, f: int, x: np.ndarray) -> None:
+        """Say when particles leave the photograph's view (behind the camera or past its borders), and how many."""
+        if self._camera is None:
+            return
+        K, (height, width) = self._camera
+        z = x[:, 2]
+        uv = x[:, :2] / np.maximum(z, 1e-9)[:, None] * K[[0, 1], [0, 1]] + K[:2, 2]
+        n = int(np.count_nonzero((z <= 0) | (uv[:, 0] < 0) | (uv[:, 1] < 0) | (uv[:, 0] > width)
+                                 | (uv[:, 1] > height)))
+        if n != self._outside_logged and (abs(n - self._outside_logged) >= 0.01 * len(self.masses) or n == 0
+                                          or self._outside_logged == 0):
+            log.info("frame %d: %d of %d particles are outside the picture", f, n, len(self.masses))
+            self._outside_logged = n
 
     def _follow_every(self, max_speed: float, h: float) -> int:
         """Substeps between grid moves: no particle (up to the last frame's speed, what a condition may
