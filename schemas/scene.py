@@ -320,6 +320,11 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
         view.image = check(view.image, f"reconstruct.extra_views[{i}].image")
 
 
+MIN_PHOTO_PX = 16
+"""Shorter side of the smallest photograph accepted: GrabCut needs background pixels around the object
+(a 1x1 photograph failed inside OpenCV), and splat's tiles are 16 px."""
+
+
 def _check_images(scene: Scene) -> None:
     """The photograph and masks must be readable, masks the photo's size and not empty, boxes inside."""
     import numpy as np
@@ -332,6 +337,10 @@ def _check_images(scene: Scene) -> None:
         raise InputError(scene.image, None, "cannot read this file as an image",
                          "give a PNG or JPEG photograph in 'image' of " + str(yaml_file))
     h, w = photo.shape[:2]
+    if min(h, w) < MIN_PHOTO_PX:
+        raise InputError(scene.image, "image", f"the photograph is {w}x{h} pixels, below the {MIN_PHOTO_PX} px "
+                         "that segmentation and reconstruction need on its shorter side",
+                         f"give a photograph at least {MIN_PHOTO_PX}x{MIN_PHOTO_PX} pixels in 'image' of {yaml_file}")
     for k, obj in enumerate(scene.objects):
         if obj.box is not None:
             x0, y0, x1, y1 = obj.box
