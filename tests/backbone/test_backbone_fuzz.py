@@ -19,7 +19,7 @@ EXAMPLES = sorted((REPO / "scenes").glob("*/scene.yaml"))
 PER_CASE_MS = 2000
 """A bounded time per document: every example scene loads in well under a tenth of it."""
 
-FUZZ = settings(max_examples=150, deadline=PER_CASE_MS, derandomize=True,
+FUZZ = settings(max_examples=150, deadline=PER_CASE_MS, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 
 scalars = (st.none() | st.booleans() | st.integers(-10**30, 10**30) | st.floats(allow_nan=True, allow_infinity=True)
