@@ -371,8 +371,8 @@ def check_lineage(scene, **given: Optional[Path]) -> Dict[str, Any]:
     digests = {role: file_digest(p) for role, p in paths.items()}
     stages: Dict[str, str] = {}
     for role, header in headers.items():
-        if "inputs" not in header:
-            continue
+        if "inputs" not in header or header.get("schema") != f"physmotion.{role}":
+            continue  # no record; or a file of another kind, which read_artifact refuses as such
         record = json.loads(header["inputs"])
         for source, digest in record["files"].items():
             if source in digests and digests[source] != digest:

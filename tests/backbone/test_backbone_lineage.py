@@ -109,3 +109,10 @@ def test_an_output_that_names_an_input_is_refused(two_runs, capsys):
                   a / "trajectories.h5", "--out", a / "coarse.h5", "--video", a / "coarse.h5")
     assert "--video names the same file as --out" in err
     assert (a / "gaussians.h5").read_bytes() == before
+
+
+@pytest.mark.slow
+def test_a_file_of_another_kind_is_named_as_such_not_as_another_lineage(two_runs, capsys, tmp_path):
+    scenes, a, _, _ = two_runs
+    err = refusal(capsys, simulate, "--scene", scenes["a"], "--gaussians", a / "coarse.h5", "--out", tmp_path / "t.h5")
+    assert "not 'physmotion.gaussians'" in err and "made from another" not in err
