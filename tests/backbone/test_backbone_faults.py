@@ -156,12 +156,44 @@ def test_a_stopped_program_says_so_in_one_paragraph_and_leaves_nothing(tmp_path)
     assert list(out.parent.iterdir()) == []
 
 
+@pytest.fixture(scope="module")
+def tiny_gaussians(tmp_path_factory) -> tuple[Path, Path]:
+    """The tiny scene, with a simulation long enough that failing after it would take a while, and its
+    gaussians.h5."""
+    folder = tmp_path_factory.mktemp("tiny")
+    scene = write_scene(folder / "s")
+    raw = yaml.safe_load(scene.read_text())
+    raw["physics"]["duration_s"] = 20.0
+    scene.write_text(yaml.safe_dump(raw))
+    gaussians = folder / "gaussians.h5"
+    subprocess.run([str(BIN / "pm-reconstruct"), "--scene", str(scene), "--out", str(gaussians), "--device", "cpu"],
+                   check=True, capture_output=True)
+    return scene, gaussians
+
+
+def program_args(program: str, scene: Path, gaussians: Path, out: Path) -> list[str]:
+    inputs = [] if program == "pm-reconstruct" else ["--gaussians", str(gaussians)]
+    return [str(BIN / program), "--scene", str(scene), *inputs, "--out", str(out), "--device", "cpu"]
+
+
 @pytest.mark.slow
-def test_programs_on_a_read_only_folder_fail_before_the_work(tmp_path, read_only):
-    scene = write_scene(tmp_path / "s")
+@pytest.mark.parametrize("program", ["pm-reconstruct", "pm-simulate"])
+def test_programs_on_a_read_only_folder_fail_before_the_work(tiny_gaussians, read_only, program):
     started = time.perf_counter()
-    proc = subprocess.run([str(BIN / "pm-reconstruct"), "--scene", str(scene), "--out",
-                           str(read_only / "gaussians.h5"), "--device", "cpu"], capture_output=True, text=True)
+    proc = subprocess.run(program_args(program, *tiny_gaussians, read_only / "out.h5"), capture_output=True,
+                          text=True)
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
-    assert "Read-only file system" in proc.stderr and "optimising" not in proc.stderr
+    assert f"error in {read_only / 'out.h5'}: cannot write this output: Read-only file system" in proc.stderr
+    assert "optimising" not in proc.stderr and "frame 1/" not in proc.stderr
     assert time.perf_counter() - started < 30
+
+
+@pytest.mark.slow
+def test_a_setup_image_that_cannot_be_written_stops_the_simulation_before_it_runs(tiny_gaussians, tmp_path):
+    (tmp_path / "setup.png").mkdir()  # cv2.imwrite returned False here, and the log said "wrote setup.png"
+    proc = subprocess.run(program_args("pm-simulate", *tiny_gaussians, tmp_path / "trajectories.h5"),
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert f"error in {tmp_path / 'setup.png'}: cannot write this output" in proc.stderr
+    assert "wrote" not in proc.stderr and "frame 1/" not in proc.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["setup.png"]
