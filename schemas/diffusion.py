@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 
 class DiffusionModels(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     stable_diffusion: Optional[Path] = Field(None, description="Stable Diffusion 2.1 folder (env PHYSMOTION_SD_PATH)")
     controlnet_depth: Optional[Path] = Field(None, description="depth ControlNet folder (env PHYSMOTION_CONTROLNET_DEPTH)")
@@ -21,7 +21,7 @@ class DiffusionModels(BaseModel):
 
 
 class LoraSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     enabled: bool = Field(False, description="personalise the UNet on the object (pm-lora) before sampling")
     steps: int = Field(1500, gt=0, description="training steps (paper: 1500)")
@@ -30,7 +30,7 @@ class LoraSettings(BaseModel):
 
 
 class DiffusionSettings(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     models: DiffusionModels = DiffusionModels()
     resolution: int = Field(768, gt=0, multiple_of=8, description="sampling width in pixels (SD 2.1: 768)")

@@ -7,6 +7,8 @@ from typing import Optional
 import cv2
 import numpy as np
 
+from .files import write_file
+
 
 def read_image(path: Path | str) -> Optional[np.ndarray]:
     """An image file with its alpha and bit depth (as cv2.IMREAD_UNCHANGED reads it), turned upright as
@@ -31,3 +33,13 @@ def read_image(path: Path | str) -> Optional[np.ndarray]:
             if shown is not None and colour.shape == shown.shape and np.array_equal(colour, shown):
                 return np.ascontiguousarray(candidate)
     return stored  # a layout OpenCV reads differently with and without alpha (grey + alpha): as stored
+
+
+def write_image(path: Path | str, image: np.ndarray) -> Path:
+    """Write an image (H,W,3) BGR u8 in the format of ``path``'s suffix (.png), encoded in memory and written
+    atomically (schemas.files.write_file): a failed write raises, never passes unnoticed."""
+    path = Path(path)
+    ok, encoded = cv2.imencode(path.suffix, image)
+    if not ok:
+        raise ValueError(f"OpenCV could not encode a {image.shape} {image.dtype} image as {path.suffix}")
+    return write_file(path, encoded.tobytes())

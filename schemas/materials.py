@@ -13,7 +13,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 
 class _Elastic(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     youngs_modulus: float = Field(2.0e5, gt=0, description="Young's modulus E in Pa")
     poisson_ratio: float = Field(0.3, ge=0, lt=0.5, description="Poisson ratio nu, in [0, 0.5)")

@@ -3,12 +3,15 @@ the ``--device`` flag and logging.
 
 A program's ``main`` builds its parser with :func:`stage_parser`, then hands its
 body to :func:`run_main`, which turns an :class:`InputError` into one readable
-paragraph on stderr and exit code 2.
+paragraph on stderr and exit code 2, and a termination signal (SIGTERM, SIGHUP,
+SIGINT: what Snakemake and a terminal send) into one paragraph and exit code
+128 + signal, after the writes in progress have removed their temporary files.
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from pathlib import Path
 from typing import Callable, Optional, Sequence
@@ -36,6 +39,18 @@ class InputError(Exception):
     def paragraph(self) -> str:
         where = f"{self.file}" + (f", field '{self.field}'" if self.field else "")
         return f"error in {where}: {self.problem.rstrip('.')}. Fix: {self.fix.rstrip('.')}."
+
+
+class Stopped(BaseException):
+    """A termination signal arrived; a BaseException, so that no ``except Exception`` swallows it."""
+
+    def __init__(self, signum: int):
+        self.signum = signum
+        super().__init__(signal.Signals(signum).name)
+
+
+def _stop(signum, _frame):
+    raise Stopped(signum)
 
 
 def stage_parser(prog: str, description: str) -> argparse.ArgumentParser:
@@ -69,8 +84,21 @@ def run_main(body: Callable[[argparse.Namespace], None], parser: argparse.Argume
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO,
                         format=f"%(asctime)s {parser.prog} %(levelname)s %(message)s", datefmt="%H:%M:%S")
+    previous = {signum: signal.signal(signum, _stop) for signum in (signal.SIGTERM, signal.SIGHUP, signal.SIGINT)}
     try:
         body(args)
     except InputError as err:
         print(f"{parser.prog}: {err.paragraph()}", file=sys.stderr)
         sys.exit(EXIT_INPUT_ERROR)
+    except Stopped as stop:
+        print(f"{parser.prog}: stopped by {stop} before it finished; outputs are written only when complete, so "
+              "none of this run's is there. Fix: run it again (Snakemake reruns the job).", file=sys.stderr)
+        sys.exit(128 + stop.signum)
+    except MemoryError:
+        print(f"{parser.prog}: ran out of memory. Fix: lower the scene's sizes (physics.grid, "
+              "physics.particles_per_cell, physics.duration_s, render.width) or give the job more memory.",
+              file=sys.stderr)
+        sys.exit(EXIT_INPUT_ERROR)
+    finally:  # a program called in-process (tests) gives the caller its own handlers back
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)

@@ -26,7 +26,9 @@ Vec3 = Tuple[float, float, float]
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    # allow_inf_nan: every float must be finite, refused under its own key (a NaN fails every bound check,
+    # so pydantic would otherwise report the first bound, "should be <= 240").
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class CameraConfig(_Strict):
@@ -38,7 +40,8 @@ class CameraConfig(_Strict):
 class ObjectConfig(_Strict):
     mask: Optional[Path] = Field(None, description="mask image (non-zero = object); else box; neither: image alpha, else GrabCut")
     box: Optional[Tuple[float, float, float, float]] = Field(None, description="[x0, y0, x1, y1] in pixels, refined by GrabCut")
-    size_m: float = Field(0.25, gt=0, description="largest extent of the object in metres")
+    size_m: float = Field(0.25, ge=0.01, le=1000, description="largest extent of the object in metres (1 cm to "
+                          "1 km: a smaller object would stand nearer than splat's near plane, 1 cm from the camera)")
     material: Material = Field(default_factory=Jelly, description="material preset and its keys")
 
     @model_validator(mode="after")
@@ -163,8 +166,8 @@ Condition = Annotated[Union[Impulse, Velocity, Force, Torque, Fixed], Field(disc
 
 
 class PhysicsConfig(_Strict):
-    duration_s: float = Field(1.0, gt=0, description="length of the video in seconds")
-    fps: float = Field(24.0, gt=0, le=240, description="frames per second")
+    duration_s: float = Field(1.0, gt=0, le=600, description="length of the video in seconds (at most 10 minutes)")
+    fps: float = Field(24.0, ge=1, le=240, description="frames per second")
     gravity: Optional[Vec3] = Field(None, description="m/s^2; null: 9.81 down in the picture, turned by camera.pitch_deg")
     grid: int = Field(64, ge=8, le=512, description="grid cells along the longest side of the domain")
     particles_per_cell: int = Field(8, ge=1, le=64, description="interior fill density")
@@ -230,8 +233,30 @@ class Scene(_Strict):
 # ---------------------------------------------------------------------------
 # Loading
 
+class DuplicateKeyError(yaml.YAMLError):
+    """A mapping gives the same key twice (YAML forbids it; PyYAML would keep the last silently)."""
+
+    def __init__(self, key: Any, first_line: int, second_line: int):
+        self.key, self.first_line, self.second_line = key, first_line, second_line
+        super().__init__(f"key {key!r} on lines {first_line} and {second_line}")
+
+
 class _Yaml12Loader(yaml.SafeLoader):
-    """PyYAML speaks YAML 1.1, where `2e5` is a string; YAML 1.2 makes it a float."""
+    """PyYAML speaks YAML 1.1, where `2e5` is a string; YAML 1.2 makes it a float.
+    Duplicate keys are refused, as YAML 1.2 says, rather than the last one winning."""
+
+    def construct_mapping(self, node, deep=False):
+        if isinstance(node, yaml.MappingNode):
+            first_line = {}
+            for key_node, _ in node.value:
+                if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                    continue  # unhashable keys are PyYAML's own error; merged keys may be overridden
+                key = self.construct_object(key_node)
+                line = key_node.start_mark.line + 1
+                if key in first_line:
+                    raise DuplicateKeyError(key, first_line[key], line)
+                first_line[key] = line
+        return super().construct_mapping(node, deep)
 
 
 _Yaml12Loader.add_implicit_resolver(
@@ -270,6 +295,8 @@ def _explain(err: dict) -> Tuple[str, str]:
         return "required key is missing", "add it (see docs/scene.schema.json)"
     if kind == "union_tag_invalid":
         return msg, "use one of the listed values"
+    if kind == "finite_number":
+        return "the value is infinite or not a number (.inf, .nan)", "give a finite number (see docs/scene.schema.json)"
     return msg.removeprefix("Value error, "), "see docs/scene.schema.json for the allowed values and units"
 
 
@@ -277,6 +304,9 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
     """Make every path absolute (relative to the scene folder) and check that it exists."""
     def check(path: Path, field: str) -> Path:
         full = path if path.is_absolute() else (folder / path)
+        if full.is_dir():
+            raise InputError(folder / "scene.yaml", field, f"'{path}' is a folder, not a file",
+                             "give the path of the file inside it")
         if not full.is_file():
             raise InputError(folder / "scene.yaml", field, f"file '{path}' does not exist",
                              f"put the file in {folder} or correct the path")
@@ -301,6 +331,11 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
         view.image = check(view.image, f"reconstruct.extra_views[{i}].image")
 
 
+MIN_PHOTO_PX = 16
+"""Shorter side of the smallest photograph accepted: GrabCut needs background pixels around the object
+(a 1x1 photograph failed inside OpenCV), and splat's tiles are 16 px."""
+
+
 def _check_images(scene: Scene) -> None:
     """The photograph and masks must be readable, masks the photo's size and not empty, boxes inside."""
     import numpy as np
@@ -313,6 +348,10 @@ def _check_images(scene: Scene) -> None:
         raise InputError(scene.image, None, "cannot read this file as an image",
                          "give a PNG or JPEG photograph in 'image' of " + str(yaml_file))
     h, w = photo.shape[:2]
+    if min(h, w) < MIN_PHOTO_PX:
+        raise InputError(scene.image, "image", f"the photograph is {w}x{h} pixels, below the {MIN_PHOTO_PX} px "
+                         "that segmentation and reconstruction need on its shorter side",
+                         f"give a photograph at least {MIN_PHOTO_PX}x{MIN_PHOTO_PX} pixels in 'image' of {yaml_file}")
     for k, obj in enumerate(scene.objects):
         if obj.box is not None:
             x0, y0, x1, y1 = obj.box
@@ -348,7 +387,15 @@ def load_scene(path: Path | str, check_files: bool = True) -> Scene:
     if not path.is_file():
         raise InputError(path, None, "scene file does not exist", "give the path of a scene.yaml (or its folder)")
     try:
-        raw = yaml.load(path.read_text(), Loader=_Yaml12Loader)
+        raw = yaml.load(path.read_text(encoding="utf-8"), Loader=_Yaml12Loader)
+    except UnicodeDecodeError as err:
+        raise InputError(path, None, f"not UTF-8 text (byte {err.start} cannot be decoded)",
+                         "save scene.yaml as UTF-8 text") from None
+    except OSError as err:
+        raise InputError(path, None, f"cannot be read ({err.strerror})", "check the file's permissions") from None
+    except DuplicateKeyError as err:
+        raise InputError(path, str(err.key), f"key {str(err.key)!r} is given twice in one mapping, on line "
+                         f"{err.first_line} and line {err.second_line}", "keep one of them") from None
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""

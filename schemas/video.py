@@ -4,11 +4,17 @@ OpenCV's wheels cannot write H.264, so every program writes video here.
 """
 from __future__ import annotations
 
-import os
+import io
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+
+from .files import write_file
+
+
+X264_THREADS = 4
+"""Encoder threads, fixed (see write_video); x264 runs them on however many cores there are."""
 
 
 def even_size(width: int, height: int) -> tuple[int, int]:
@@ -17,7 +23,7 @@ def even_size(width: int, height: int) -> tuple[int, int]:
 
 
 def write_video(path: Path | str, frames: np.ndarray, fps: float, crf: int = 14) -> Path:
-    """Write RGB frames to an H.264 MP4, atomically (temp file beside it, renamed when complete).
+    """Write RGB frames to an H.264 MP4, encoded in memory and written atomically (schemas.files.write_file).
 
     Args:
         frames: (T, h, w, 3) uint8 RGB; odd sizes are cropped by one pixel to even.
@@ -32,21 +38,18 @@ def write_video(path: Path | str, frames: np.ndarray, fps: float, crf: int = 14)
     if frames.ndim != 4 or frames.shape[-1] != 3 or frames.dtype != np.uint8:
         raise ValueError(f"frames must be (T, h, w, 3) uint8, got {frames.shape} {frames.dtype}")
     width, height = even_size(frames.shape[2], frames.shape[1])
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.partial-{os.getpid()}{path.suffix}")
-    try:
-        with av.open(str(tmp), mode="w", format="mp4") as container:
-            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
-            stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
-            stream.options = {"crf": str(crf)}
-            for rgb in frames[:, :height, :width]:
-                container.mux(stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")))
-            container.mux(stream.encode())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    return path
+    encoded = io.BytesIO()
+    with av.open(encoded, mode="w", format="mp4") as container:
+        stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
+        stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
+        # x264 splits the work by its thread count, and its output depends on that count: left to x264
+        # ("auto", from the CPUs this process may use) two runs on the same frames differed by up to 38/255
+        # when one was pinned to one core. A fixed count gives the same bytes wherever it runs.
+        stream.options = {"crf": str(crf), "threads": str(X264_THREADS)}
+        for rgb in frames[:, :height, :width]:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")))
+        container.mux(stream.encode())
+    return write_file(path, encoded.getvalue())
 
 
 def read_video(path: Path | str) -> tuple[np.ndarray, float, str]:

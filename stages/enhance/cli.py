@@ -5,15 +5,18 @@ import argparse
 import logging
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, read_artifact
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, check_lineage, read_artifact
+from schemas.files import check_writable, refuse_overwriting
+from schemas.images import write_image
 from schemas.video import write_video
 
 from . import flow
 from .compositing import blend_over_background, resize_to, unpremultiply
-from .contact_sheet import contact_sheet, write_png
+from .contact_sheet import contact_sheet
 
 log = logging.getLogger("physmotion.enhance")
 
@@ -44,6 +47,12 @@ def build_parser() -> argparse.ArgumentParser:
 def enhance(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     device = resolve_device(args.device)
+    sheet_path = args.out.with_name("contact_sheet.png")
+    refuse_overwriting({"--out": args.out, "contact_sheet.png": sheet_path},
+                       {"--scene": scene.file, "--coarse": args.coarse, "--gaussians": args.gaussians,
+                        "--latents": args.latents})
+    check_writable([args.out, sheet_path])
+    check_lineage(scene, gaussians=args.gaussians, coarse=args.coarse, latents=args.latents)
     coarse = read_artifact(args.coarse, CoarseArtifact)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     backend = scene.enhance.backend
@@ -67,7 +76,7 @@ def enhance(args: argparse.Namespace) -> None:
     sheet = contact_sheet({"input": np.broadcast_to(photo, frames.shape), "coarse": coarse_over_background,
                            "enhanced": frames}, coarse.fps)
     write_video(args.out, frames, coarse.fps)
-    write_png(args.out.with_name("contact_sheet.png"), sheet)
+    write_image(sheet_path, cv2.cvtColor(sheet, cv2.COLOR_RGB2BGR))
     log.info("wrote %s (config %s)", args.out, config_hash(stage_keys(scene, "enhance"))[:12])
 
 

@@ -1,7 +1,6 @@
 """A contact sheet: evenly spaced frames in rows (input, coarse, enhanced), one PNG to glance at."""
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Dict
 
 import cv2
@@ -37,10 +36,3 @@ def contact_sheet(rows: Dict[str, np.ndarray], fps: float, columns: int = 5) -> 
         for name, frames in rows.items()
     ], axis=0)
 
-
-def write_png(path: Path, rgb: np.ndarray) -> None:
-    """Write an RGB image as PNG (via a temporary file, so no half-written picture is left)."""
-    tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-    if not cv2.imwrite(str(tmp), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-        raise OSError(f"could not write {path}")
-    tmp.replace(path)

@@ -11,8 +11,9 @@ from typing import Optional
 import numpy as np
 import torch
 
-from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import GaussiansArtifact, write_artifact
+from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
+from schemas.artifacts import GaussiansArtifact, file_digest, write_artifact
+from schemas.files import check_writable, refuse_overwriting
 
 from .optimize import LOSS_TERMS
 from .pipeline import optimize_scene, prepare
@@ -52,6 +53,28 @@ def model_folder(flag: Optional[Path], scene_key: Optional[Path], env: str) -> O
     return chosen
 
 
+def source_files(scene) -> dict:
+    """The files the reconstruction reads besides scene.yaml, by their scene key."""
+    files = {"image": scene.image, "reconstruct.init_ply": scene.reconstruct.init_ply}
+    files.update({f"objects[{k}].mask": o.mask for k, o in enumerate(scene.objects)})
+    files.update({f"reconstruct.extra_views[{i}].image": v.image for i, v in enumerate(scene.reconstruct.extra_views)})
+    return {key: path for key, path in files.items() if path is not None}
+
+
+def check_result(scene, initial: int, kept: int, loss: np.ndarray) -> None:
+    """An InputError instead of an artifact when the optimisation diverged or kept no Gaussian."""
+    total = loss[:, 0]
+    if not np.isfinite(total).all():
+        first = int(np.argmin(np.isfinite(total)))
+        raise InputError(scene.file, "reconstruct", f"the optimisation diverged: its loss is {total[first]} from "
+                         f"iteration {first + 1}", "check objects[].size_m (metres) and camera.fov_deg, or lower "
+                         "reconstruct.iterations; nothing was written")
+    if kept == 0:
+        raise InputError(scene.file, "objects", f"no Gaussian is left of the {initial} lifted (all transparent "
+                         "or off the camera)", "check objects[].size_m (metres), camera.fov_deg and the masks or "
+                         "boxes; nothing was written")
+
+
 def reconstruct(args: argparse.Namespace) -> None:
     started = time.perf_counter()
     device = resolve_device(args.device)
@@ -60,9 +83,13 @@ def reconstruct(args: argparse.Namespace) -> None:
         # oversubscribes them (SSIM forward+backward measured 1.5 s instead of 0.04 s on 2 busy cores).
         torch.set_num_threads(1)
     scene = load_scene(args.scene)
+    sources = source_files(scene)
+    refuse_overwriting({"--out": args.out}, {"--scene": scene.file, **sources})
+    check_writable([args.out])
     prepared = prepare(scene, device, model_folder(args.sam_model, scene.reconstruct.sam_model, "PHYSMOTION_SAM_MODEL"),
                        model_folder(args.depth_model, scene.reconstruct.depth_model, "PHYSMOTION_DEPTH_MODEL"))
     gaussians, loss = optimize_scene(scene, prepared, device)
+    check_result(scene, len(prepared.initial), len(gaussians), loss)
     height, width = prepared.labels.shape
     artifact = GaussiansArtifact(
         K=prepared.K, world_to_camera=np.eye(4), width=width, height=height,
@@ -71,7 +98,8 @@ def reconstruct(args: argparse.Namespace) -> None:
         photo=prepared.photo, mask=prepared.labels, background=prepared.background,
         depth_prior=prepared.depth_prior, loss=loss, loss_terms=LOSS_TERMS)
     write_artifact(args.out, artifact, created_by="pm-reconstruct",
-                   config_hash=config_hash(stage_keys(scene, "reconstruct")))
+                   config_hash=config_hash(stage_keys(scene, "reconstruct")),
+                   inputs={"files": {key: file_digest(path) for key, path in sources.items()}, "stages": {}})
     log.info("wrote %s: %d Gaussians in %.1f s", args.out, len(gaussians), time.perf_counter() - started)
 
 

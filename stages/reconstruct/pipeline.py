@@ -11,6 +11,8 @@ import numpy as np
 
 from schemas import InputError, Scene
 
+from splat.project import NEAR_PLANE
+
 from .background import inpaint_background
 from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
 from .geometry import intrinsics_from_fov, working_size
@@ -22,6 +24,11 @@ from .views import extra_view, input_view
 
 log = logging.getLogger("physmotion.reconstruct")
 
+MAX_PHOTO_PX = 4096
+"""pm-reconstruct works on a copy of the photograph at most this long (the artifact holds the copy): a
+20000 x 20000 photograph took minutes and 4.7 GB at full size with no word in the log, while the
+optimisation works at reconstruct.resolution (at most 2048) and the video at render.width (at most 4096)."""
+NEAR_PLANE_M = float(NEAR_PLANE)
 MAX_GAUSSIANS = 30000
 """Initial Gaussians of all objects at most: keeps 600 iterations at 256 px within about 3 minutes
 on 2 CPU cores (benchmarks/RESULTS.md); larger objects are sampled every 2nd, 3rd... pixel."""
@@ -51,11 +58,21 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
             depth_model: Optional[Path] = None) -> Prepared:
     """Segment, inpaint, estimate depth and lift the initial Gaussians of ``scene``."""
     photo, alpha = read_photo(scene.image)
+    full_height, full_width = photo.shape[:2]
+    size = working_size(full_width, full_height, MAX_PHOTO_PX)
+    scale = size[0] / full_width
+    if scale < 1:
+        photo = downsample(photo, size)
+        alpha = downsample(alpha, size) if alpha is not None else None
+        log.info("photograph %dx%d px: working on a copy of %dx%d px (at most %d px long)", full_width,
+                 full_height, *size, MAX_PHOTO_PX)
+    else:
+        log.info("photograph %dx%d px", full_width, full_height)
     height, width = photo.shape[:2]
     K = intrinsics_from_fov(scene.camera.fov_deg, width, height)
     sam = SamSegmenter(sam_model, device) if sam_model is not None else None
-    specs = [ObjectSpec(mask=o.mask, box=o.box) for o in scene.objects]
-    labels = segment_objects(photo, alpha, specs, scene.file, sam)
+    specs = [ObjectSpec(mask=o.mask, box=tuple(v * scale for v in o.box) if o.box else None) for o in scene.objects]
+    labels = segment_objects(photo, alpha, specs, scene.file, sam, mask_shape=(full_height, full_width))
     log.info("segmented %d object(s): %s pixels", len(specs),
              ", ".join(str(int((labels == k + 1).sum())) for k in range(len(specs))))
     background = inpaint_background(photo, labels)
@@ -64,6 +81,10 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
     for k, d in enumerate(depths):
         log.info("object %d: front depth %.3f-%.3f m, back up to %.3f m", k, np.nanmin(d.front),
                  np.nanmax(d.front), np.nanmax(d.back))
+        if not np.nanmin(d.front) > NEAR_PLANE_M:  # written so that NaN fails too
+            raise InputError(scene.file, f"objects[{k}].size_m", f"an object of {scene.objects[k].size_m:g} m "
+                             f"covering its pixels stands {np.nanmin(d.front):.3g} m from the camera, nearer than the "
+                             f"renderer sees ({NEAR_PLANE_M:g} m)", "give the object's real size in metres")
     initial = initial_gaussians(scene, photo, labels, depths, K)
     return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial)
 

@@ -111,8 +111,21 @@ def check_box_fill(mask: np.ndarray, box: Sequence[float], scene_file: Path | st
                          "lost the object", fix)
 
 
-def read_mask(path: Path, shape: tuple[int, int], field: str) -> np.ndarray:
-    """Boolean mask from a mask image: non-zero (any channel, or alpha) is the object."""
+def check_box_leaves_background(box: Sequence[float], width: int, height: int, scene_file: Path | str,
+                                field: str) -> None:
+    """An InputError when a box gives GrabCut nothing to learn from: no pixel outside it, or under 2 px inside."""
+    if box[0] < 1 and box[1] < 1 and box[2] > width - 1 and box[3] > height - 1:
+        raise InputError(scene_file, field, f"box [{', '.join(f'{v:g}' for v in box)}] covers the whole {width}x{height} "
+                         "photograph, so GrabCut has no background to learn from",
+                         "draw the box around the object only, or give a mask file")
+    if box[2] - box[0] < 2 or box[3] - box[1] < 2:
+        raise InputError(scene_file, field, f"box [{', '.join(f'{v:g}' for v in box)}] is under 2 pixels wide or "
+                         "high", "draw the box around the whole object, in this photograph's pixels")
+
+
+def read_mask(path: Path, shape: tuple[int, int], field: str, size: Optional[tuple[int, int]] = None) -> np.ndarray:
+    """Boolean mask from a mask image of ``shape`` (H,W): non-zero (any channel, or alpha) is the object;
+    brought to ``size`` (w, h) when given (the bounded copy of the photograph)."""
     raw = read_image(path)
     if raw is None:
         raise InputError(path, field, "cannot read this file as an image", "give a PNG mask")
@@ -120,14 +133,20 @@ def read_mask(path: Path, shape: tuple[int, int], field: str) -> np.ndarray:
         raise InputError(path, field, f"mask is {raw.shape[1]}x{raw.shape[0]} but the photograph is "
                          f"{shape[1]}x{shape[0]}", "make the mask exactly the photograph's size")
     mask = (raw > 127) if raw.ndim == 2 else (raw > 127).any(axis=2)
+    if size is not None and size != (shape[1], shape[0]):
+        mask = cv2.resize(mask.astype(np.uint8), size, interpolation=cv2.INTER_AREA) > 0
     if not mask.any():
         raise InputError(path, field, "mask has no pixel above 127", "paint the object white on black")
     return mask
 
 
 def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Sequence[ObjectSpec],
-                    scene_file: Path | str = "scene.yaml", sam: Optional["SamSegmenter"] = None) -> np.ndarray:
+                    scene_file: Path | str = "scene.yaml", sam: Optional["SamSegmenter"] = None,
+                    mask_shape: Optional[tuple[int, int]] = None) -> np.ndarray:
     """Label image (H,W) u8: 0 background, k+1 object k.
+
+    ``mask_shape`` (H,W): the size mask files must have, when ``photo`` is a smaller copy of the
+    photograph (boxes then are in the copy's pixels); the masks are brought to the copy's size.
 
     Per object: its mask file; else its box, refined by SAM when ``sam`` is
     given, by GrabCut otherwise; else (one object only) the image alpha; else
@@ -139,8 +158,9 @@ def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Seq
     for k, spec in enumerate(objects):
         field = f"objects[{k}]"
         if spec.mask is not None:
-            mask = read_mask(spec.mask, (height, width), f"{field}.mask")
+            mask = read_mask(spec.mask, mask_shape or (height, width), f"{field}.mask", (width, height))
         elif spec.box is not None:
+            check_box_leaves_background(spec.box, width, height, scene_file, f"{field}.box")
             mask = sam.segment(photo, spec.box) if sam is not None else grabcut(photo, spec.box)
             check_box_fill(mask, spec.box, scene_file, f"{field}.box", "draw the box around the whole object with a "
                            "few pixels to spare, in this photograph's pixels, or give a mask file")
@@ -150,7 +170,7 @@ def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Seq
             raise InputError(scene_file, field, "several objects but this one has neither mask nor box",
                              "give each object a mask file or a box [x0, y0, x1, y1]")
         else:
-            mx, my = DEFAULT_BOX_MARGIN * width, DEFAULT_BOX_MARGIN * height
+            mx, my = max(1.0, DEFAULT_BOX_MARGIN * width), max(1.0, DEFAULT_BOX_MARGIN * height)
             box = (mx, my, width - mx, height - my)
             mask = grabcut(photo, box)
             check_box_fill(mask, box, scene_file, field, "give a box around the object, or a mask file")

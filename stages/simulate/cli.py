@@ -5,11 +5,12 @@ import argparse
 import logging
 from pathlib import Path
 
-import cv2
 import warp as wp
 
 from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import GaussiansArtifact, read_artifact, write_artifact
+from schemas.artifacts import GaussiansArtifact, check_lineage, read_artifact, write_artifact
+from schemas.files import check_writable, refuse_overwriting
+from schemas.images import write_image
 
 from .setup_image import draw_setup
 from .simulation import Simulation
@@ -39,17 +40,19 @@ def simulate(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     device = resolve_device(args.device)
     wp.config.quiet = not args.verbose
+    setup = args.out.parent / "setup.png"
+    refuse_overwriting({"--out": args.out, "setup.png": setup}, {"--scene": scene.file, "--gaussians": args.gaussians})
+    check_writable([args.out, setup])  # before the simulation, not after it
+    digests = check_lineage(scene, gaussians=args.gaussians)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     sim = Simulation(scene.physics, [o.material for o in scene.objects], gaussians.means, gaussians.object_id,
                      pitch_deg=scene.camera.pitch_deg, silhouette=(gaussians.mask, gaussians.K),
                      scene_file=scene.file, device=device)
-    setup = args.out.parent / "setup.png"
-    setup.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(setup), draw_setup(sim, gaussians.photo, gaussians.K))
+    write_image(setup, draw_setup(sim, gaussians.photo, gaussians.K))
     log.info("wrote %s", setup)
     trajectories = sim.run()
     write_artifact(args.out, trajectories, created_by="pm-simulate",
-                   config_hash=config_hash(stage_keys(scene, "simulate")))
+                   config_hash=config_hash(stage_keys(scene, "simulate")), inputs=digests)
     log.info("wrote %s", args.out)
 
 

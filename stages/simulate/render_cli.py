@@ -6,7 +6,8 @@ import logging
 from pathlib import Path
 
 from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, read_artifact, write_artifact
+from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, check_lineage, read_artifact, write_artifact
+from schemas.files import check_writable, refuse_overwriting
 from schemas.video import write_video
 
 from .render import render_video
@@ -35,10 +36,15 @@ def build_parser() -> argparse.ArgumentParser:
 def render(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     device = resolve_device(args.device)
+    refuse_overwriting({"--out": args.out, "--video": args.video},
+                       {"--scene": scene.file, "--gaussians": args.gaussians, "--trajectories": args.trajectories})
+    check_writable([args.out, args.video])
+    digests = check_lineage(scene, gaussians=args.gaussians, trajectories=args.trajectories)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     trajectories = read_artifact(args.trajectories, TrajectoriesArtifact)
     coarse = render_video(gaussians, trajectories, scene.render.width, device)
-    write_artifact(args.out, coarse, created_by="pm-render", config_hash=config_hash(stage_keys(scene, "render")))
+    write_artifact(args.out, coarse, created_by="pm-render", config_hash=config_hash(stage_keys(scene, "render")),
+                   inputs=digests)
     write_video(args.video, coarse.rgb, coarse.fps)
     log.info("wrote %s and %s", args.out, args.video)
 

@@ -1,3 +1,6 @@
+import shlex
+
+
 def lora_dir(wildcards):
     """The LoRA folder when the scene asks for personalisation, else nothing."""
     s = scene(wildcards.scene)
@@ -17,7 +20,7 @@ def artifacts_and_lora(*names, latents=False):
 
 def optional_flag(flag, files):
     """' --flag path' for a present optional input, '' otherwise."""
-    return lambda wildcards, input: f" {flag} {input[files]}" if files in input.keys() else ""
+    return lambda wildcards, input: f" {flag} {shlex.quote(input[files])}" if files in input.keys() else ""
 
 
 rule lora:
@@ -41,7 +44,7 @@ rule lora:
         runtime=240,
         gpu=GPU,
     shell:
-        "pm-lora --scene {params.scene} --gaussians {input.gaussians} --out {output} --device " + DEVICE + " > {log} 2>&1"
+        "pm-lora --scene {params.scene:q} --gaussians {input.gaussians:q} --out {output:q} --device " + DEVICE + " > {log:q} 2>&1"
 
 
 rule invert:
@@ -65,8 +68,8 @@ rule invert:
         runtime=240,
         gpu=GPU,
     shell:
-        "pm-invert --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}{params.lora}"
-        " --out {output} --device " + DEVICE + " > {log} 2>&1"
+        "pm-invert --scene {params.scene:q} --coarse {input.coarse:q} --gaussians {input.gaussians:q}{params.lora}"
+        " --out {output:q} --device " + DEVICE + " > {log:q} 2>&1"
 
 
 rule enhance:
@@ -93,5 +96,5 @@ rule enhance:
         runtime=lambda w: 240 if uses_diffusion(w.scene) else 30,
         gpu=lambda w: GPU if uses_diffusion(w.scene) else 0,
     shell:
-        "pm-enhance --scene {params.scene} --coarse {input.coarse} --gaussians {input.gaussians}"
-        "{params.latents}{params.lora} --out {output.video} --device " + DEVICE + " > {log} 2>&1"
+        "pm-enhance --scene {params.scene:q} --coarse {input.coarse:q} --gaussians {input.gaussians:q}"
+        "{params.latents}{params.lora} --out {output.video:q} --device " + DEVICE + " > {log:q} 2>&1"

@@ -26,4 +26,4 @@ rule reconstruct:
         runtime=60,
         gpu=GPU,
     shell:
-        "pm-reconstruct --scene {params.scene} --out {output} --device " + DEVICE + " > {log} 2>&1"
+        "pm-reconstruct --scene {params.scene:q} --out {output:q} --device " + DEVICE + " > {log:q} 2>&1"

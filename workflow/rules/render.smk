@@ -20,5 +20,5 @@ rule render:
         runtime=30,
         gpu=GPU,
     shell:
-        "pm-render --scene {params.scene} --gaussians {input.gaussians} --trajectories {input.trajectories}"
-        " --out {output.coarse} --video {output.video} --device " + DEVICE + " > {log} 2>&1"
+        "pm-render --scene {params.scene:q} --gaussians {input.gaussians:q} --trajectories {input.trajectories:q}"
+        " --out {output.coarse:q} --video {output.video:q} --device " + DEVICE + " > {log:q} 2>&1"

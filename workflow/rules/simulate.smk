@@ -19,5 +19,5 @@ rule simulate:
         runtime=120,
         gpu=GPU,
     shell:
-        "pm-simulate --scene {params.scene} --gaussians {input.gaussians} --out {output.trajectories}"
-        " --device " + DEVICE + " > {log} 2>&1"
+        "pm-simulate --scene {params.scene:q} --gaussians {input.gaussians:q} --out {output.trajectories:q}"
+        " --device " + DEVICE + " > {log:q} 2>&1"

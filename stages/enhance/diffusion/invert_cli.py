@@ -6,7 +6,8 @@ import logging
 from pathlib import Path
 
 from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import CoarseArtifact, GaussiansArtifact, read_artifact, write_artifact
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, check_lineage, read_artifact, write_artifact
+from schemas.files import check_writable, refuse_overwriting
 
 log = logging.getLogger("physmotion.diffusion")
 
@@ -31,10 +32,15 @@ def invert(args: argparse.Namespace) -> None:
 
     scene = load_scene(args.scene)
     device = resolve_device(args.device)
+    refuse_overwriting({"--out": args.out}, {"--scene": scene.file, "--coarse": args.coarse,
+                                             "--gaussians": args.gaussians})
+    check_writable([args.out])
+    digests = check_lineage(scene, gaussians=args.gaussians, coarse=args.coarse)
     coarse = read_artifact(args.coarse, CoarseArtifact)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     latents = make_latents(scene, coarse, gaussians, args.lora, device)
-    write_artifact(args.out, latents, created_by="pm-invert", config_hash=config_hash(stage_keys(scene, "invert")))
+    write_artifact(args.out, latents, created_by="pm-invert", config_hash=config_hash(stage_keys(scene, "invert")),
+                   inputs=digests)
     log.info("wrote %s: latents %s", args.out, latents.latents.shape)
 
 

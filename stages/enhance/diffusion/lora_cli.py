@@ -12,7 +12,7 @@ import cv2
 import torch
 
 from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import GaussiansArtifact, read_artifact
+from schemas.artifacts import GaussiansArtifact, check_lineage, read_artifact
 
 log = logging.getLogger("physmotion.diffusion")
 
@@ -44,6 +44,7 @@ def train(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     settings = scene.enhance.diffusion
     device = resolve_device(args.device)
+    check_lineage(scene, gaussians=args.gaussians)
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     extra_views = [_read_rgb(view.image) for view in scene.reconstruct.extra_views]
     images = training_images(gaussians.photo, gaussians.mask, extra_views, settings.resolution)

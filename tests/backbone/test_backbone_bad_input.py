@@ -1,0 +1,81 @@
+"""Bad scenes refused at load under their own key: non-finite numbers, duplicate keys, out-of-bounds sizes,
+folders given as files."""
+import math
+
+import pytest
+
+from schemas import InputError, load_scene
+
+from .conftest import tiny_scene_dict, write_scene
+
+
+def refusal(tmp_path, edit=None, text=None) -> InputError:
+    scene = tiny_scene_dict()
+    if edit:
+        edit(scene)
+    path = write_scene(tmp_path, scene, text)
+    with pytest.raises(InputError) as info:
+        load_scene(path)
+    return info.value
+
+
+NON_FINITE = [
+    ("physics.fps", lambda s, v: s["physics"].update(fps=v)),
+    ("camera.pitch_deg", lambda s, v: s["camera"].update(pitch_deg=v)),
+    ("physics.duration_s", lambda s, v: s["physics"].update(duration_s=v)),
+    ("objects[0].material.youngs_modulus", lambda s, v: s["objects"][0]["material"].update(youngs_modulus=v)),
+    ("physics.conditions[0].velocity[0]", lambda s, v: s["physics"]["conditions"][0].update(velocity=[v, 0, 0])),
+    ("physics.gravity[1]", lambda s, v: s["physics"].update(gravity=[0, v, 0])),
+    ("enhance.diffusion.guidance_scale", lambda s, v: s["enhance"].update(diffusion={"guidance_scale": v})),
+]
+
+
+@pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
+@pytest.mark.parametrize("field, edit", NON_FINITE, ids=[f for f, _ in NON_FINITE])
+def test_non_finite_numbers_are_refused_under_their_own_key(tmp_path, field, edit, value):
+    err = refusal(tmp_path, lambda s: edit(s, value))
+    assert err.field == field
+    assert "infinite or not a number" in err.problem and "less than" not in err.problem
+
+
+def test_yaml_spellings_of_nan_and_inf_are_refused(tmp_path):
+    for spelling in (".nan", ".inf", "-.Inf", "1e999"):
+        text = f"image: photo.png\nobjects:\n  - mask: mask.png\nphysics:\n  fps: {spelling}\n"
+        err = refusal(tmp_path, text=text)
+        assert err.field == "physics.fps" and "infinite or not a number" in err.problem, spelling
+
+
+def test_duplicate_keys_are_refused_naming_both_lines(tmp_path):
+    text = "image: photo.png\nobjects:\n  - mask: mask.png\n    size_m: 0.2\n    size_m: 5\n"
+    err = refusal(tmp_path, text=text)
+    assert err.field == "size_m" and "line 4 and line 5" in err.problem
+
+
+def test_a_key_in_two_different_mappings_is_not_a_duplicate(tmp_path):
+    text = ("image: photo.png\nobjects:\n  - {mask: mask.png, size_m: 0.2}\n  - {mask: mask.png, size_m: 0.2}\n"
+            "physics: {duration_s: 0.25}\n")
+    assert len(load_scene(write_scene(tmp_path, text=text)).objects) == 2
+
+
+@pytest.mark.parametrize("field, edit", [
+    ("objects[0].size_m", lambda s: s["objects"][0].update(size_m=1e30)),
+    ("objects[0].size_m", lambda s: s["objects"][0].update(size_m=1e-6)),
+    ("physics.duration_s", lambda s: s["physics"].update(duration_s=1e6)),
+    ("physics.fps", lambda s: s["physics"].update(fps=1e-3)),
+    ("physics.grid", lambda s: s["physics"].update(grid=10 ** 6)),
+])
+def test_sizes_and_times_outside_their_bounds_are_refused(tmp_path, field, edit):
+    assert refusal(tmp_path, edit).field == field
+
+
+def test_an_image_path_that_is_a_folder_is_called_a_folder(tmp_path):
+    (tmp_path / "photos").mkdir()
+    err = refusal(tmp_path, lambda s: s.update(image="photos"))
+    assert err.field == "image" and "is a folder" in err.problem and "does not exist" not in err.problem
+
+
+def test_a_scene_file_that_is_not_utf8_is_refused(tmp_path):
+    write_scene(tmp_path)
+    (tmp_path / "scene.yaml").write_bytes(b"image: photo\xff.png\n")
+    with pytest.raises(InputError, match="UTF-8"):
+        load_scene(tmp_path / "scene.yaml")
