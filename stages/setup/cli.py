@@ -66,6 +66,7 @@ def serve(args: argparse.Namespace) -> None:
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
     try:
         sock.bind((args.host, args.port))
+        sock.listen(128)  # from now on a browser's connection waits for the server instead of being refused
     except OSError as err:
         raise InputError("--port", None, f"cannot listen on {args.host}:{args.port} ({err.strerror})",
                          "give another --port, or 0 for any free one") from None
