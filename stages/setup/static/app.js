@@ -411,6 +411,7 @@ function scheduleCheck() {
 }
 
 async function save() {
+  clearTimeout(checkTimer); // the save reports the loader's verdict itself
   const hints = {};
   app.scene.objects.forEach((_, k) => { hints[k] = hasStrokes(k) ? app.hints[k].toDataURL("image/png") : null; });
   status("saving…");
