@@ -53,6 +53,8 @@ async function adopt(data) {
   } else {
     app.photo = null;
     $("empty").hidden = false;
+    app.canvas.width = Math.min($("stage").clientWidth - 30, 900);
+    app.canvas.height = Math.round(app.canvas.width * 9 / 16);
   }
   renderPanel();
   redraw();
@@ -105,7 +107,7 @@ function hasStrokes(k) {
 
 function fit() {
   const wrap = $("stage");
-  const maxW = wrap.clientWidth - 30, maxH = window.innerHeight * 0.68;
+  const maxW = wrap.clientWidth - 30, maxH = window.innerHeight * 0.64;
   app.scale = Math.min(maxW / app.photo.width, maxH / app.photo.height, 3);
   app.canvas.width = Math.round(app.photo.width * app.scale);
   app.canvas.height = Math.round(app.photo.height * app.scale);
@@ -202,7 +204,10 @@ function defaultRegion(kind) {
 
 function renderConditions() {
   const typeSelect = $("condition-type");
-  if (!typeSelect.options.length) typeSelect.replaceChildren(...Object.keys(app.conditionDefs).map((t) => el("option", { value: t }, t)));
+  if (!typeSelect.options.length) {
+    typeSelect.replaceChildren(...Object.keys(app.conditionDefs).map((t) => el("option", { value: t }, t)));
+    typeSelect.value = "impulse" in app.conditionDefs ? "impulse" : typeSelect.options[0].value;
+  }
   const list = $("conditions");
   list.replaceChildren();
   app.scene.physics.conditions.forEach((c, i) => list.append(conditionCard(c, i)));
@@ -434,6 +439,7 @@ async function startPreview() {
   const { ok, data } = await api("POST", "/api/preview");
   if (!ok) { Forms.showError(data.error.field, data.error.message); return; }
   $("preview-pane").hidden = false;
+  $("preview-pane").scrollIntoView({ block: "end" });
   pollPreview();
 }
 
@@ -449,7 +455,7 @@ async function pollPreview() {
     $("preview-setup").src = data.setup + "?t=" + Date.now(); $("preview-setup").dataset.src = data.setup;
   }
   if (data.state === "running") { setTimeout(pollPreview, 500); return; }
-  if (data.state === "done") playFrames(data.frames, data.fps);
+  if (data.state === "done") { playFrames(data.frames, data.fps); $("preview-pane").scrollIntoView({ block: "end" }); }
 }
 
 function playFrames(frames, fps) {
@@ -520,7 +526,9 @@ $("brush").addEventListener("input", redraw);
 $("save").addEventListener("click", save);
 $("preview").addEventListener("click", startPreview);
 $("cancel").addEventListener("click", async () => { await api("DELETE", "/api/preview"); });
-$("photo-file").addEventListener("change", (e) => { if (e.target.files[0]) uploadPhoto(e.target.files[0]); });
+for (const id of ["photo-file", "photo-file-start"]) {
+  $(id).addEventListener("change", (e) => { if (e.target.files[0]) uploadPhoto(e.target.files[0]); });
+}
 setTool("box");
 window.pm = app; // for the browser tests: the state behind the page
 load();
