@@ -9,6 +9,7 @@ from __future__ import annotations
 import base64
 import contextlib
 import json
+import os
 import re
 import tempfile
 from pathlib import Path
@@ -23,7 +24,7 @@ from starlette.responses import FileResponse, JSONResponse, Response
 from starlette.routing import Route
 
 from schemas import InputError, Scene
-from stages.reconstruct.segment import ObjectSpec, read_photo, segment_objects
+from stages.reconstruct.segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
 
 from . import scene_file as sf
 from .preview import Preview
@@ -56,6 +57,7 @@ class SetupApp:
         self.raw, self.header = sf.read_raw(self.folder)
         self.preview = Preview()
         self._photo_cache: tuple[Optional[Path], Optional[tuple]] = (None, None)
+        self._sam: tuple[Optional[Path], Optional[SamSegmenter]] = (None, None)
 
     # -- helpers -----------------------------------------------------------------------------------------------
 
@@ -68,6 +70,24 @@ class SetupApp:
         if self._photo_cache[0] != path:
             self._photo_cache = (path, read_photo(path))
         return self._photo_cache[1]
+
+    def sam(self) -> Optional[SamSegmenter]:
+        """pm-reconstruct's SAM where reconstruct.sam_model or $PHYSMOTION_SAM_MODEL names a local model, else None.
+
+        Raises:
+            InputError: the folder holds no model, or transformers is not installed.
+        """
+        named = (self.raw.get("reconstruct") or {}).get("sam_model") or os.environ.get("PHYSMOTION_SAM_MODEL")
+        if not named:
+            return None
+        folder = Path(named) if Path(named).is_absolute() else (self.folder / named).resolve()
+        if self._sam[0] != folder:
+            try:
+                self._sam = (folder, SamSegmenter(folder))
+            except ImportError:
+                raise InputError(folder, "reconstruct.sam_model", "SAM needs transformers, which is not installed",
+                                 "pip install 'physmotion[reconstruct]', or remove the key to use GrabCut") from None
+        return self._sam[1]
 
     def use_photo(self, name: str) -> None:
         """Make the file ``name`` of the folder the scene's photograph (a new scene: one object, all defaults)."""
@@ -149,16 +169,19 @@ class SetupApp:
                 mask = self.folder / body["mask"] if body.get("mask") and safe_file(self.folder, body["mask"]) else None
                 box = tuple(float(v) for v in body["box"]) if body.get("box") else None
                 spec = ObjectSpec(mask=mask, box=box, hints=hints)
-                labels = await run_in_threadpool(segment_objects, photo[0], photo[1], [spec], "scene.yaml")
+                sam = self.sam() if box is not None and hints is None else None
+                labels = await run_in_threadpool(segment_objects, photo[0], photo[1], [spec], "scene.yaml", sam)
         except InputError as err:
             if err.field and err.field.startswith("objects[0]"):  # the one object segmented here is object k
                 err.field = f"objects[{k}]" + err.field[len("objects[0]"):]
             return error_json(err)
         inside = labels > 0
         ys, xs = np.nonzero(inside)
+        method = ("the mask file" if mask else "SAM in the box" if sam else "GrabCut in the box" if box else
+                  "the photograph's alpha" if photo[1] is not None and hints is None else "GrabCut on the whole photograph")
         png = sf.encode_png(inside.astype(np.uint8) * 255)
         return JSONResponse({"mask": "data:image/png;base64," + base64.b64encode(png).decode(),
-                             "pixels": int(inside.sum()),
+                             "pixels": int(inside.sum()), "method": method,
                              "bbox": [int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1]})
 
     async def check(self, request: Request) -> Response:

@@ -126,6 +126,18 @@ def test_set_up_save_reload_and_preview_a_scene(tmp_path, start_server, browser)
     velocity = browser.execute_script("return pm.scene.physics.conditions[0].velocity")
     per_unit = browser.execute_script("return Draw.pixelsPerUnit(pm, pm.scene.physics.conditions[0])")
     assert velocity[:2] == pytest.approx([60 / per_unit, -45 / per_unit], rel=0.08)
+
+    # the cup's foot held: a fixed region as a box, its corners dragged to the object's lower fifth
+    Select(browser.find_element(By.ID, "condition-type")).select_by_value("fixed")
+    browser.find_element(By.ID, "add-condition").click()
+    Select(browser.find_element(By.NAME, "physics.conditions[1].region")).select_by_value("box")
+    x0, y0, x1, y1 = browser.execute_script("return Draw.objectRect(pm, 0)")
+    for corner, target in (("corner1", (x1, y1)), ("corner0", (x0, y0 + 0.8 * (y1 - y0)))):
+        at = browser.execute_script(f"return Draw.handles(pm, 1).find(h => h.kind === '{corner}').at")
+        drag(browser, [at, target], tool="move")
+    region = browser.execute_script("return pm.scene.physics.conditions[1].region.box")
+    assert region[:2] == pytest.approx([0, 0.8], abs=0.02) and region[3:5] == pytest.approx([1, 1], abs=0.01)
+    browser.execute_script("document.querySelector('.condition').scrollIntoView()")
     screenshot(browser, tmp_path, "setup_conditions.png")
 
     # save: scene.yaml the loader accepts, with the hint image
@@ -134,6 +146,7 @@ def test_set_up_save_reload_and_preview_a_scene(tmp_path, start_server, browser)
     scene = load_scene(folder)
     assert scene.objects[0].material.preset == "metal" and list(scene.objects[0].box) == box
     assert list(scene.physics.conditions[0].velocity) == velocity
+    assert scene.physics.conditions[1].type == "fixed" and list(scene.physics.conditions[1].region.box) == region
     hints = cv2.imread(str(scene.objects[0].hints), cv2.IMREAD_UNCHANGED)
     assert hints[188, 236, 3] == 255 and hints[188, 236, :3].max() == 0  # background: opaque black
     assert hints[160, 160, 3] == 255 and hints[160, 160, :3].min() == 255  # object: opaque white

@@ -14,9 +14,10 @@ import pytest
 import yaml
 
 from schemas import load_scene
-from stages.reconstruct.segment import ObjectSpec, read_photo, segment_objects
+from stages.reconstruct.segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
 from stages.setup.scene_file import MAX_IMAGE_BYTES
 
+from ..reconstruct.test_reconstruct_models import tiny_sam  # noqa: F401 (a fixture)
 from .conftest import REPO, coffee_folder
 
 
@@ -173,3 +174,19 @@ def test_a_stage_error_reaches_the_page_as_the_stages_paragraph(tmp_path, start_
     finished = wait_for(server, ("cancelled", "done", "failed"), timeout=90)
     assert finished["state"] == "failed"
     assert finished["message"].startswith("pm-reconstruct: error in") and "objects[0].box" in finished["message"]
+
+
+def test_with_a_local_sam_model_the_box_is_refined_by_sam(ball, tiny_sam):
+    """As pm-reconstruct does it: a box without hints goes to SAM when the scene names a local model."""
+    folder, server = ball
+    _, state = request(server, "GET", "/api/scene")
+    state["scene"]["reconstruct"] = {"sam_model": str(tiny_sam)}
+    status, _ = request(server, "PUT", "/api/scene", {"scene": state["scene"], "hints": {}})
+    assert status == 200
+    box = [90, 70, 230, 210]
+    status, answer = request(server, "POST", "/api/mask", {"object": 0, "box": box})
+    assert status == 200 and answer["method"] == "SAM in the box"
+    photo, alpha = read_photo(folder / "photo.png")
+    expected = segment_objects(photo, alpha, [ObjectSpec(box=tuple(box))], sam=SamSegmenter(tiny_sam)) > 0
+    page_mask = cv2.imdecode(np.frombuffer(base64.b64decode(answer["mask"].split(",")[1]), np.uint8), 0) > 127
+    assert np.array_equal(page_mask, expected)

@@ -130,8 +130,7 @@ async function updateMask(k) {
   } else {
     const img = await image(data.mask);
     app.masks[k] = { canvas: tint(img, Draw.OBJECT_COLOURS[k % Draw.OBJECT_COLOURS.length]), bbox: data.bbox, pixels: data.pixels };
-    const how = o.mask ? `mask file ${o.mask}` : o.box ? "GrabCut in the box" : "the image alpha or GrabCut on the whole photograph";
-    $("mask-info").textContent = `object ${k}: ${data.pixels} pixels (${how}${hasStrokes(k) ? ", with your strokes" : ""})`;
+    $("mask-info").textContent = `object ${k}: ${data.pixels} pixels (${data.method}${hasStrokes(k) ? ", with your strokes" : ""})`;
   }
   redraw();
 }
