@@ -5,19 +5,27 @@ VENV := .venv
 BIN := $(VENV)/bin
 INSTALLED := $(VENV)/.installed
 
-.PHONY: demo test debug-kernels
+.PHONY: demo test browser debug-kernels
 
 $(INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[test,examples,reconstruct,diffusion]"
+	$(BIN)/pip install --quiet -e ".[test,examples,reconstruct,diffusion,setup]"
 	touch $@
 
 demo: $(INSTALLED)
 	$(BIN)/snakemake --cores 2
 
-test: $(INSTALLED)
+test: $(INSTALLED) browser
 	$(BIN)/pytest
+
+# Debian's chromium and chromedriver for pm-setup's browser test (tests/setup), installed with apt when
+# missing and this is root on Debian; elsewhere that test is skipped and says why.
+browser:
+	@command -v chromium >/dev/null && command -v chromedriver >/dev/null || \
+	{ [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null && apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium chromium-driver >/dev/null; } || \
+	echo "chromium and chromedriver could not be installed: the browser test will be skipped"
 
 # Every simulate kernel in Warp's debug mode (bounds-checked indexing); splat's
 # kernels are checked the same way by tests/splat.

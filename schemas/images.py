@@ -43,3 +43,26 @@ def write_image(path: Path | str, image: np.ndarray) -> Path:
     if not ok:
         raise ValueError(f"OpenCV could not encode a {image.shape} {image.dtype} image as {path.suffix}")
     return write_file(path, encoded.tobytes())
+
+
+HINT_OBJECT, HINT_BACKGROUND = (255, 255, 255, 255), (0, 0, 0, 255)
+"""objects[].hints as written (BGRA): an opaque white stroke says object, an opaque black one background."""
+
+
+def read_hints(path: Path | str, shape: tuple[int, int]) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    """(object, background) boolean masks (H,W) of a hint image; None when it is unreadable or not ``shape`` (H,W).
+
+    With alpha, a stroke is an opaque pixel (alpha above 127): bright (grey above 127) marks the object, dark
+    the background, so hints painted in any editor on a transparent layer work. Without alpha, white (grey
+    250 and up) marks the object, black (5 and below) the background, every other grey no hint.
+    """
+    raw = read_image(path)
+    if raw is None or raw.shape[:2] != tuple(shape):
+        return None
+    if raw.dtype != np.uint8:
+        raw = (raw // 257).astype(np.uint8)
+    grey = raw if raw.ndim == 2 else cv2.cvtColor(raw[..., :3], cv2.COLOR_BGR2GRAY)
+    if raw.ndim == 3 and raw.shape[2] == 4:
+        opaque = raw[..., 3] > 127
+        return opaque & (grey > 127), opaque & (grey <= 127)
+    return grey >= 250, grey <= 5

@@ -40,6 +40,9 @@ class CameraConfig(_Strict):
 class ObjectConfig(_Strict):
     mask: Optional[Path] = Field(None, description="mask image (non-zero = object); else box; neither: image alpha, else GrabCut")
     box: Optional[Tuple[float, float, float, float]] = Field(None, description="[x0, y0, x1, y1] in pixels, refined by GrabCut")
+    hints: Optional[Path] = Field(None, description="hint image for GrabCut, the photograph's size: opaque white "
+                                  "strokes are object, opaque black strokes background, transparent no hint "
+                                  "(pm-setup paints it)")
     size_m: float = Field(0.25, ge=0.01, le=1000, description="largest extent of the object in metres (1 cm to "
                           "1 km: a smaller object would stand nearer than splat's near plane, 1 cm from the camera)")
     material: Material = Field(default_factory=Jelly, description="material preset and its keys")
@@ -48,6 +51,8 @@ class ObjectConfig(_Strict):
     def _one_segmentation(self) -> "ObjectConfig":
         if self.mask is not None and self.box is not None:
             raise ValueError("give either mask or box, not both")
+        if self.mask is not None and self.hints is not None:
+            raise ValueError("hints correct a box's GrabCut; a mask file needs none: give mask or hints, not both")
         if self.box is not None and not (self.box[0] < self.box[2] and self.box[1] < self.box[3]):
             raise ValueError("box must be [x0, y0, x1, y1] with x0 < x1 and y0 < y1")
         return self
@@ -316,6 +321,8 @@ def _resolve_paths(scene: Scene, folder: Path) -> None:
     for k, obj in enumerate(scene.objects):
         if obj.mask is not None:
             obj.mask = check(obj.mask, f"objects[{k}].mask")
+        if obj.hints is not None:
+            obj.hints = check(obj.hints, f"objects[{k}].hints")
     for key in ("sam_model", "depth_model"):
         folder_path = getattr(scene.reconstruct, key)
         if folder_path is not None:
@@ -369,6 +376,12 @@ def _check_images(scene: Scene) -> None:
             if not np.any(mask):
                 raise InputError(obj.mask, f"objects[{k}].mask", "mask is empty (all zero)",
                                  "paint the object non-zero in the mask, or use a box instead")
+        if obj.hints is not None:
+            hints = read_image(obj.hints)
+            if hints is None or hints.shape[:2] != (h, w):
+                found = "cannot be read as an image" if hints is None else f"is {hints.shape[1]}x{hints.shape[0]}"
+                raise InputError(obj.hints, f"objects[{k}].hints", f"hint image {found}, the photograph is {w}x{h}",
+                                 "give a PNG of the photograph's size (pm-setup writes one), or remove the key")
 
 
 def load_scene(path: Path | str, check_files: bool = True) -> Scene:
@@ -428,7 +441,9 @@ def stage_keys(scene: Scene, stage: str) -> dict:
     """
     data = _relative_paths(scene.model_dump(mode="json"), str(scene.folder))
     if stage == "reconstruct":
-        objs = [{k: o[k] for k in ("mask", "box", "size_m")} for o in data["objects"]]
+        # hints only where given, so scenes without them keep the hashes of their earlier results
+        objs = [{k: o[k] for k in ("mask", "box", "size_m")} | ({"hints": o["hints"]} if o["hints"] else {})
+                for o in data["objects"]]
         return {"image": data["image"], "camera": data["camera"], "objects": objs, "reconstruct": data["reconstruct"]}
     if stage == "simulate":
         return {"materials": [o["material"] for o in data["objects"]], "physics": data["physics"],

@@ -71,7 +71,8 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
     height, width = photo.shape[:2]
     K = intrinsics_from_fov(scene.camera.fov_deg, width, height)
     sam = SamSegmenter(sam_model, device) if sam_model is not None else None
-    specs = [ObjectSpec(mask=o.mask, box=tuple(v * scale for v in o.box) if o.box else None) for o in scene.objects]
+    specs = [ObjectSpec(mask=o.mask, box=tuple(v * scale for v in o.box) if o.box else None, hints=o.hints)
+             for o in scene.objects]
     labels = segment_objects(photo, alpha, specs, scene.file, sam, mask_shape=(full_height, full_width))
     log.info("segmented %d object(s): %s pixels", len(specs),
              ", ".join(str(int((labels == k + 1).sum())) for k in range(len(specs))))

@@ -15,7 +15,7 @@ import numpy as np
 from scipy import ndimage
 
 from schemas import InputError
-from schemas.images import read_image
+from schemas.images import read_hints, read_image
 
 from .geometry import working_size
 from .local_model import load_local_model
@@ -45,6 +45,7 @@ class ObjectSpec:
 
     mask: Optional[Path] = None
     box: Optional[tuple[float, float, float, float]] = None
+    hints: Optional[Path] = None
 
 
 def read_photo(path: Path) -> tuple[np.ndarray, Optional[np.ndarray]]:
@@ -72,12 +73,21 @@ def largest_component(mask: np.ndarray) -> np.ndarray:
     return labels == 1 + int(np.argmax(sizes))
 
 
-def grabcut(photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
+Hints = tuple[np.ndarray, np.ndarray]
+"""(object, background) strokes as boolean masks (H,W), from schemas.images.read_hints."""
+
+
+def grabcut(photo: np.ndarray, box: Sequence[float], hints: Optional[Hints] = None) -> np.ndarray:
     """Boolean mask (H,W) of the object inside ``box`` [x0,y0,x1,y1] (pixels), by GrabCut.
 
     GrabCut sees the box and GRABCUT_CONTEXT of its size around it, at most GRABCUT_MAX_PX long.
+    ``hints`` are strokes the user drew (pm-setup's page, objects[].hints): their pixels are certain
+    object or certain background, and the box grows to take in object strokes drawn outside it.
     """
     height, width = photo.shape[:2]
+    if hints is not None and hints[0].any():
+        ys, xs = np.nonzero(hints[0])
+        box = (min(box[0], xs.min()), min(box[1], ys.min()), max(box[2], xs.max() + 1), max(box[3], ys.max() + 1))
     margin = GRABCUT_CONTEXT * max(box[2] - box[0], box[3] - box[1])
     cx0, cy0 = max(0, int(np.floor(box[0] - margin))), max(0, int(np.floor(box[1] - margin)))
     cx1, cy1 = min(width, int(np.ceil(box[2] + margin))), min(height, int(np.ceil(box[3] + margin)))
@@ -87,16 +97,25 @@ def grabcut(photo: np.ndarray, box: Sequence[float]) -> np.ndarray:
     small = cv2.resize(crop, (w, h), interpolation=cv2.INTER_AREA) if scale < 1 else crop
     x0, y0 = int(np.floor((box[0] - cx0) * scale)), int(np.floor((box[1] - cy0) * scale))
     x1, y1 = min(w, int(np.ceil((box[2] - cx0) * scale))), min(h, int(np.ceil((box[3] - cy0) * scale)))
-    labels = np.zeros((h, w), np.uint8)
+    # What GC_INIT_WITH_RECT starts from (outside the box background, inside probably object), then the strokes.
+    labels = np.full((h, w), cv2.GC_BGD, np.uint8)
+    labels[y0:y1, x0:x1] = cv2.GC_PR_FGD
+    if hints is not None:
+        for strokes, label in zip(hints, (cv2.GC_FGD, cv2.GC_BGD)):
+            # INTER_AREA then any coverage: a one-pixel stroke survives the shrink to the working size
+            covered = cv2.resize(strokes[cy0:cy1, cx0:cx1].astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+            labels[covered > 0] = label
     bgd, fgd = np.zeros((1, 65), np.float64), np.zeros((1, 65), np.float64)
     cv2.setRNGSeed(0)  # GrabCut's k-means initialisation draws from OpenCV's RNG
-    cv2.grabCut(cv2.cvtColor(small, cv2.COLOR_RGB2BGR), labels, (x0, y0, x1 - x0, y1 - y0), bgd, fgd,
-                GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_RECT)
+    cv2.grabCut(cv2.cvtColor(small, cv2.COLOR_RGB2BGR), labels, None, bgd, fgd, GRABCUT_ITERATIONS,
+                cv2.GC_INIT_WITH_MASK)
     inside = ((labels == cv2.GC_FGD) | (labels == cv2.GC_PR_FGD)).astype(np.float32)
     if scale < 1:
         inside = cv2.resize(inside, (cx1 - cx0, cy1 - cy0), interpolation=cv2.INTER_LINEAR)
     mask = np.zeros((height, width), bool)
     mask[cy0:cy1, cx0:cx1] = inside > 0.5
+    if hints is not None:  # the strokes are certain, also where the shrink and the way back blurred them
+        mask = (mask | hints[0]) & ~hints[1]
     return largest_component(mask)
 
 
@@ -149,22 +168,34 @@ def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Seq
     photograph (boxes then are in the copy's pixels); the masks are brought to the copy's size.
 
     Per object: its mask file; else its box, refined by SAM when ``sam`` is
-    given, by GrabCut otherwise; else (one object only) the image alpha; else
-    GrabCut from the whole image less a 5 % margin. Where masks overlap the
-    earlier object keeps the pixel.
+    given and the object has no hints, by GrabCut otherwise (with the hints'
+    strokes); else (one object only, no hints) the image alpha; else GrabCut
+    from the whole image less a 5 % margin. Where masks overlap the earlier
+    object keeps the pixel.
     """
     height, width = photo.shape[:2]
     labels = np.zeros((height, width), np.uint8)
     for k, spec in enumerate(objects):
         field = f"objects[{k}]"
+        hints = None
+        if spec.hints is not None:
+            full_height, full_width = mask_shape or (height, width)
+            hints = read_hints(spec.hints, (full_height, full_width))
+            if hints is None:
+                raise InputError(spec.hints, f"{field}.hints", "cannot read this file as a hint image of the "
+                                 f"photograph's size ({full_width}x{full_height})",
+                                 "give a PNG of that size, or remove the key")
+            if (full_height, full_width) != (height, width):  # strokes onto the bounded copy
+                hints = tuple(cv2.resize(h.astype(np.uint8), (width, height), interpolation=cv2.INTER_NEAREST) > 0
+                              for h in hints)
         if spec.mask is not None:
             mask = read_mask(spec.mask, mask_shape or (height, width), f"{field}.mask", (width, height))
         elif spec.box is not None:
             check_box_leaves_background(spec.box, width, height, scene_file, f"{field}.box")
-            mask = sam.segment(photo, spec.box) if sam is not None else grabcut(photo, spec.box)
+            mask = sam.segment(photo, spec.box) if sam is not None and hints is None else grabcut(photo, spec.box, hints)
             check_box_fill(mask, spec.box, scene_file, f"{field}.box", "draw the box around the whole object with a "
                            "few pixels to spare, in this photograph's pixels, or give a mask file")
-        elif alpha is not None and len(objects) == 1:
+        elif alpha is not None and len(objects) == 1 and hints is None:
             mask = alpha > 127
         elif len(objects) > 1:
             raise InputError(scene_file, field, "several objects but this one has neither mask nor box",
@@ -172,7 +203,7 @@ def segment_objects(photo: np.ndarray, alpha: Optional[np.ndarray], objects: Seq
         else:
             mx, my = max(1.0, DEFAULT_BOX_MARGIN * width), max(1.0, DEFAULT_BOX_MARGIN * height)
             box = (mx, my, width - mx, height - my)
-            mask = grabcut(photo, box)
+            mask = grabcut(photo, box, hints)
             check_box_fill(mask, box, scene_file, field, "give a box around the object, or a mask file")
         free = mask & (labels == 0)
         if not free.any():

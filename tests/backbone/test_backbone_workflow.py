@@ -152,3 +152,25 @@ def test_diffusion_scene_plans_lora_and_invert(tmp_path):
     raw["enhance"]["diffusion"]["lora"]["enabled"] = False
     scene.write_text(yaml.safe_dump(raw))
     assert "lora" not in planned_jobs(tmp_path)
+
+
+@pytest.mark.slow
+def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run):
+    """snakemake --report embeds each item's bytes (base64) in one HTML file: each must be there, and the
+    plots must hold the artifacts' own numbers."""
+    import base64
+
+    snakemake(finished_run, "--report", str(finished_run / "report.html"))
+    html = (finished_run / "report.html").read_text()
+    out = finished_run / "results" / "tiny"
+    for name in ("video.mp4", "contact_sheet.png", "setup.png", "report/energy.svg", "report/momentum.svg",
+                 "report/loss.svg", "report/stage_times.svg"):
+        data = (out / name).read_bytes()
+        assert base64.b64encode(data).decode()[:2000] in html, f"{name} is not in report.html"
+    times = (out / "report" / "stage_times.svg").read_text()
+    assert all(f">{stage}<" in times for stage in ("reconstruct", "simulate", "render", "enhance"))
+    trajectories = read_artifact(out / "trajectories.h5", TrajectoriesArtifact)
+    energy = (out / "report" / "energy.svg").read_text()
+    assert energy.count("<polyline") == 3 and energy.count(",") >= 3 * len(trajectories.time_s)
+    loss_terms = read_artifact(out / "gaussians.h5", GaussiansArtifact).loss_terms
+    assert all(f">{term}<" in (out / "report" / "loss.svg").read_text() for term in loss_terms)

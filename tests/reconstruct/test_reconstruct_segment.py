@@ -141,3 +141,56 @@ def test_background_of_a_photograph_wider_than_the_exemplar_cap():
     telea = cv2.inpaint(photo, hole.astype(np.uint8), 5, cv2.INPAINT_TELEA)
     error = np.abs(background[past_seam].astype(float) - backdrop[past_seam]).mean()
     assert error < 10.0 and np.abs(telea[past_seam].astype(float) - backdrop[past_seam]).mean() > 2 * error
+
+
+def two_touching_discs(width=160, height=100):
+    """Photograph (H,W,3) of two touching striped discs on a plain ground, and each disc's mask."""
+    rows, cols = np.mgrid[0:height, 0:width]
+    left = (cols - 55) ** 2 + (rows - 50) ** 2 < 30 ** 2
+    right = ((cols - 110) ** 2 + (rows - 50) ** 2 < 27 ** 2) & ~left
+    rgb = np.full((height, width, 3), (70, 110, 150), np.uint8)
+    stripes = (cols // 4) % 2 == 0
+    rgb[(left | right) & stripes] = (230, 60, 40)
+    rgb[(left | right) & ~stripes] = (250, 210, 70)
+    return rgb, left, right
+
+
+def write_hints(path, shape, object_strokes=(), background_strokes=()):
+    """A hint image as pm-setup writes it: transparent, opaque white and black polylines 5 px wide."""
+    hints = np.zeros(shape + (4,), np.uint8)
+    for strokes, colour in ((object_strokes, (255, 255, 255, 255)), (background_strokes, (0, 0, 0, 255))):
+        for line in strokes:
+            cv2.polylines(hints, [np.array(line, np.int32)], False, colour, 5)
+    cv2.imwrite(str(path), hints)
+    return path
+
+
+def test_background_strokes_take_a_touching_look_alike_out_of_the_mask(tmp_path):
+    """GrabCut alone keeps both discs (same colours, one component); one background stroke across the
+    second disc leaves the first, as the user meant."""
+    rgb, left, right = two_touching_discs()
+    box = (15, 10, 145, 90)
+    alone = segment_objects(rgb, None, [ObjectSpec(box=box)]) == 1
+    assert iou(alone, left | right) > 0.9 and (alone & right).sum() > 0.9 * right.sum()
+    hints = write_hints(tmp_path / "hints.png", rgb.shape[:2], background_strokes=[[(110, 28), (110, 72)],
+                                                                                  [(96, 50), (128, 50)]])
+    corrected = segment_objects(rgb, None, [ObjectSpec(box=box, hints=hints)]) == 1
+    assert iou(corrected, left) > 0.9 and (corrected & right).sum() < 0.15 * right.sum()
+
+
+def test_object_strokes_outside_the_box_grow_the_mask(tmp_path):
+    """A box that cuts the disc's right side off; an object stroke over that side brings it back."""
+    rgb, left, _ = two_touching_discs()
+    rgb[:, 86:] = (70, 110, 150)  # the left disc alone
+    box = (15, 10, 70, 90)
+    cut = segment_objects(rgb, None, [ObjectSpec(box=box)]) == 1
+    hints = write_hints(tmp_path / "hints.png", rgb.shape[:2], object_strokes=[[(72, 40), (80, 50), (72, 62)]])
+    grown = segment_objects(rgb, None, [ObjectSpec(box=box, hints=hints)]) == 1
+    assert iou(cut, left) < 0.85 < 0.9 < iou(grown, left)
+
+
+def test_a_hint_image_of_another_size_is_refused(tmp_path):
+    rgb, _, _ = two_touching_discs()
+    hints = write_hints(tmp_path / "hints.png", (50, 80))
+    with pytest.raises(InputError, match="hint image of the photograph's size"):
+        segment_objects(rgb, None, [ObjectSpec(box=(15, 10, 145, 90), hints=hints)])

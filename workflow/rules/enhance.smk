@@ -76,8 +76,10 @@ rule enhance:
     input:
         unpack(artifacts_and_lora("coarse", "gaussians", latents=True)),
     output:
-        video=RESULTS / "{scene}" / "video.mp4",
-        sheet=RESULTS / "{scene}" / "contact_sheet.png",
+        video=report(RESULTS / "{scene}" / "video.mp4", category="{scene}", subcategory="video",
+                     caption="../report/video.rst"),
+        sheet=report(RESULTS / "{scene}" / "contact_sheet.png", category="{scene}", subcategory="video",
+                     caption="../report/contact_sheet.rst"),
     params:
         stage_keys_hash=keys_hash("enhance"),
         scene=scene_yaml,

@@ -1,7 +1,7 @@
 def reconstruct_inputs(wildcards):
-    """The files reconstruct reads besides scene.yaml: photograph, masks, initial PLY, extra views."""
+    """The files reconstruct reads besides scene.yaml: photograph, masks, hint images, initial PLY, extra views."""
     s = scene(wildcards.scene)
-    files = [s.image] + [o.mask for o in s.objects if o.mask is not None]
+    files = [s.image] + [o.mask for o in s.objects if o.mask is not None] + [o.hints for o in s.objects if o.hints]
     files += [s.reconstruct.init_ply] if s.reconstruct.init_ply else []
     return [str(f) for f in files + [v.image for v in s.reconstruct.extra_views]]
 

@@ -3,7 +3,8 @@ rule simulate:
         gaussians=RESULTS / "{scene}" / "gaussians.h5",
     output:
         trajectories=RESULTS / "{scene}" / "trajectories.h5",
-        setup=RESULTS / "{scene}" / "setup.png",
+        setup=report(RESULTS / "{scene}" / "setup.png", category="{scene}", subcategory="simulation",
+                     caption="../report/setup.rst"),
     params:
         stage_keys_hash=keys_hash("simulate"),
         scene=scene_yaml,
