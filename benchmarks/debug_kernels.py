@@ -9,12 +9,13 @@ an out-of-bounds access aborts the process with the failed check.
 
 First it proves that the checks are live: a kernel that reads one past the end
 of an array must abort a child process. Then it simulates a few frames of
-two small scenes that together reach every simulate kernel, with the solver's
+three small scenes that together reach every simulate kernel, with the solver's
 two-thread split: all eight material presets side by side in a walled domain
 with impulse, velocity, force, torque and fixed conditions and friction
-ground; and a cube thrown into the domain's corner, so that particles are
-held at the wall layer and stencils reach the grid's edge. Exit status 0
-means no kernel indexed out of bounds.
+ground; a cube thrown into the walls' corner, so that particles are
+held at the wall layer and stencils reach the grid's edge; a cube torn apart
+faster than the grid follows, so that particles fly off it, land on the
+ground and come back. Exit status 0 means no kernel indexed out of bounds.
 """
 from __future__ import annotations
 
@@ -74,11 +75,19 @@ def scenes() -> list[tuple[str, dict, list, list]]:
         ("every preset, every condition, friction ground, walls",
          dict(duration_s=0.1, fps=20, grid=24, walls=True, conditions=every_condition,
               ground={"enabled": True, "type": "friction", "friction": 0.3}), PRESETS, row),
-        # thrown hard at the domain's corner: particles are clamped at the wall layer, stencils at the grid's edge
-        ("a cube thrown into the domain's corner, no ground",
-         dict(duration_s=0.2, fps=10, grid=16, gravity=[0, 0, 0], ground={"enabled": False},
+        # thrown hard at the walls' corner: particles are clamped at the wall layer, stencils at the grid's edge
+        ("a cube thrown into the walls' corner, no ground",
+         dict(duration_s=0.2, fps=10, grid=16, gravity=[0, 0, 0], ground={"enabled": False}, walls=True,
               conditions=[{"type": "impulse", "velocity": [-20.0, -20.0, -20.0]}]),
          [M.Jelly()], [((0, 0, 0), (0.05, 0.05, 0.05))]),
+        # torn apart faster than the grid can follow: particles leave it, fly freely, land on the ground
+        ("a cube torn apart off the grid, onto the ground",
+         dict(duration_s=0.3, fps=10, grid=16, ground={"enabled": True, "type": "friction", "friction": 0.5},
+              conditions=[{"type": "velocity", "region": {"box": [0, 0, 0, 0.5, 1, 1]}, "velocity": [-6, -2, 0],
+                           "end_s": 0.02},
+                          {"type": "velocity", "region": {"box": [0.5, 0, 0, 1, 1, 1]}, "velocity": [6, -2, 0],
+                           "end_s": 0.02}]),
+         [M.Fracture(critical_stretch=0.01, toughness=0.01)], [((0, 0, 0), (0.05, 0.05, 0.05))]),
     ]
 
 
