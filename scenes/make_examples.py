@@ -12,11 +12,13 @@ import cv2
 import numpy as np
 import skimage.data
 
+from schemas.images import write_image
+
 HERE = Path(__file__).parent
 
 
 def write_rgb(path: Path, rgb: np.ndarray) -> None:
-    cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    write_image(path, cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
 
 
 def coffee() -> None:
@@ -30,7 +32,7 @@ def coffee() -> None:
     body = np.array([(111, 75), (263, 75), (252, 140), (236, 172), (205, 188), (165, 188), (140, 172), (118, 130)])
     cv2.fillPoly(mask, [body], 255)
     cv2.ellipse(mask, (142, 168), (18, 26), 20, 0, 360, 255, -1)  # the handle
-    cv2.imwrite(str(HERE / "coffee" / "mask.png"), mask)
+    write_image(HERE / "coffee" / "mask.png", mask)
 
 
 def logo(size: int = 256) -> None:
@@ -46,7 +48,7 @@ def logo(size: int = 256) -> None:
     # Over white where transparent, so that colour and alpha agree (the page is off-white).
     rgb = np.round(rgb * alpha[..., None] + 255 * (1 - alpha[..., None])).astype(np.uint8)
     rgba = np.dstack([rgb, np.round(alpha * 255).astype(np.uint8)])
-    cv2.imwrite(str(HERE / "logo" / "logo.png"), cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
+    write_image(HERE / "logo" / "logo.png", cv2.cvtColor(rgba, cv2.COLOR_RGBA2BGRA))
 
 
 def ball(width: int = 320, height: int = 240, radius: float = 70.0) -> None:
@@ -75,7 +77,7 @@ def ball(width: int = 320, height: int = 240, radius: float = 70.0) -> None:
     table = table * (1 - 0.5 * shadow)[..., None]
     rgb = np.where(inside[..., None], ball_rgb, table)
     write_rgb(HERE / "ball" / "photo.png", np.clip(rgb * 255 + 0.5, 0, 255).astype(np.uint8))
-    cv2.imwrite(str(HERE / "ball" / "mask.png"), inside.astype(np.uint8) * 255)
+    write_image(HERE / "ball" / "mask.png", inside.astype(np.uint8) * 255)
 
 
 if __name__ == "__main__":

@@ -90,10 +90,10 @@ def write_file(path: Path | str, data: bytes) -> Path:
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         remove_stale_partials(path)
-        free = shutil.disk_usage(path.parent).free
-        if free < len(data):
+        usage = shutil.disk_usage(path.parent)
+        if 0 < usage.total and usage.free < len(data):  # (some FUSE file systems report no sizes at all)
             raise OSError(errno.ENOSPC, f"No space left on device ({len(data) / 1e6:.1f} MB needed, "
-                          f"{free / 1e6:.1f} MB free)")
+                          f"{usage.free / 1e6:.1f} MB free)")
         with open(tmp, "wb") as f:
             f.write(data)
         os.replace(tmp, path)

@@ -36,8 +36,9 @@ def read_image(path: Path | str) -> Optional[np.ndarray]:
 
 
 def write_image(path: Path | str, image: np.ndarray) -> Path:
-    """Write an image (H,W,3) BGR u8 in the format of ``path``'s suffix (.png), encoded in memory and written
-    atomically (schemas.files.write_file): a failed write raises, never passes unnoticed."""
+    """Write an image (H,W), (H,W,3) BGR or (H,W,4) BGRA, u8, in the format of ``path``'s suffix (.png),
+    encoded in memory and written atomically (schemas.files.write_file): a failed write raises, never
+    passes unnoticed."""
     path = Path(path)
     ok, encoded = cv2.imencode(path.suffix, image)
     if not ok:

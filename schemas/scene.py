@@ -406,6 +406,9 @@ def load_scene(path: Path | str, check_files: bool = True) -> Scene:
                          "save scene.yaml as UTF-8 text") from None
     except OSError as err:
         raise InputError(path, None, f"cannot be read ({err.strerror})", "check the file's permissions") from None
+    except RecursionError:
+        raise InputError(path, None, "the YAML is nested too deeply to read", "write the scene as in "
+                         "scenes/*/scene.yaml: a few levels of mappings and lists") from None
     except DuplicateKeyError as err:
         raise InputError(path, str(err.key), f"key {str(err.key)!r} is given twice in one mapping, on line "
                          f"{err.first_line} and line {err.second_line}", "keep one of them") from None

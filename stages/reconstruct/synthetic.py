@@ -13,6 +13,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from schemas.images import write_image
+
 from .geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays
 
 
@@ -106,8 +108,8 @@ def write_scene(folder: Path, shape: Capsule | Box, fov_deg: float = 40.0, width
     """A scene folder (scene.yaml, photo.png, mask.png) of ``shape`` seen by the input camera; returns scene.yaml."""
     folder.mkdir(parents=True, exist_ok=True)
     photo = photograph(shape, intrinsics_from_fov(fov_deg, width, height), np.eye(4), width, height)
-    cv2.imwrite(str(folder / "photo.png"), cv2.cvtColor(photo.rgb, cv2.COLOR_RGB2BGR))
-    cv2.imwrite(str(folder / "mask.png"), photo.mask.astype(np.uint8) * 255)
+    write_image(folder / "photo.png", cv2.cvtColor(photo.rgb, cv2.COLOR_RGB2BGR))
+    write_image(folder / "mask.png", photo.mask.astype(np.uint8) * 255)
     (folder / "scene.yaml").write_text(
         f"image: photo.png\ncamera: {{fov_deg: {fov_deg}}}\n"
         f"objects:\n  - mask: mask.png\n    size_m: {shape.size_m}\n"

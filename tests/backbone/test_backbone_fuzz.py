@@ -4,6 +4,7 @@ Four sources of documents: random YAML trees, random text and bytes, and random 
 replaced, a key dropped or added, characters changed) of the example scenes, loaded beside
 their own photographs and masks so that the file checks run too.
 """
+import json
 import shutil
 from pathlib import Path
 
@@ -66,6 +67,14 @@ def test_random_text_loads_or_raises_input_error(example_folder, text):
 @given(data=st.binary(max_size=200))
 def test_random_bytes_load_or_raise_input_error(example_folder, data):
     load(example_folder, data)
+
+
+@settings(FUZZ, max_examples=40)
+@given(depth=st.integers(1, 1200), key=KEYS, opener=st.sampled_from(["[", "{a: "]))
+def test_deeply_nested_documents_load_or_raise_input_error(example_folder, depth, key, opener):
+    """Past a few hundred levels PyYAML's recursive composer runs out of stack (a RecursionError)."""
+    closer = "]" if opener == "[" else "}"
+    load(example_folder, f"image: photo.png\n{json.dumps(key)}: {opener * depth}1{closer * depth}\n")
 
 
 def _paths(tree, prefix=()):
