@@ -5,8 +5,8 @@
 Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
 scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
 otherwise. The object is simulated under the scene's camera, ground and
-duration with every condition removed, once per preset (the preset's
-defaults, the scene's density). Printed per run: the largest turn of the body
+duration with every condition removed, once per preset (with the preset's
+defaults). Printed per run: the largest turn of the body
 over the run (degrees, best rigid fit of all particles), the largest
 horizontal travel of its centre of mass (mm and % of size_m), the largest
 sag of the centre of mass (mm), substeps and seconds.
@@ -67,7 +67,7 @@ def main() -> None:
             physics = physics.model_copy(update={"duration_s": args.duration})
         size = scene.objects[0].size_m
         for preset in args.presets:
-            materials = [PRESET_MODELS[preset](density=o.material.density) for o in scene.objects]
+            materials = [PRESET_MODELS[preset]() for _ in scene.objects]
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
                              silhouette=(g.mask, g.K), scene_file=scene.file)

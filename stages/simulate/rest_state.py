@@ -8,8 +8,9 @@ break that if taken as they are:
   centre of mass off its support and tip the body over. `support_height`
   puts the ground plane at the lowest height at which each object resting on
   it stands: the convex hull of its points at or below the plane (seen from
-  above) holds its centre of mass with a margin, within MAX_SINK of its
-  height. The few points below the
+  above) holds its centre of mass with a margin and, for a material that
+  yields, is wide enough to carry its weight below the yield stress, within
+  MAX_SINK of its height. The few points below the
   plane stay where they are, inside the ground (they are its contact patch);
   nothing is moved, so frame 0 is still the photograph.
 - Its shape is the loaded shape, but a simulation that starts from it with no
@@ -42,42 +43,52 @@ RELAXED = 1.0e-4
 SETTLE_PERIODS = 10.0
 
 
-def _holds(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> bool:
-    """Whether the convex hull of points (N,2) holds centre (2,) at least `margin` inside its edges."""
+def _support(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> tuple[bool, float]:
+    """(whether the convex hull of points (N,2) holds centre (2,) at least `margin` inside its edges, its area m^2)."""
     if len(points_xz) < 3:
-        return False
+        return False, 0.0
     try:
         hull = ConvexHull(points_xz)
     except QhullError:  # all on one line: no area to stand on
-        return False
+        return False, 0.0
     # equations: n . p + offset <= 0 inside, unit n
-    return bool(np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -margin)
+    inside = np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -margin
+    return bool(inside), float(hull.volume)  # a 2D hull's volume is its area
 
 
-def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float) -> float:
+def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float, bearing_area: float = 0.0) -> float:
     """Lowest plane height (m, +y up) at which one object (positions (N,3), masses (N,)) stands.
 
-    Binary search over the points' heights: the support grows with the plane. An object that
-    cannot stand with the plane less than MAX_SINK of its height above its lowest point stands on
+    It stands when its support (the points at or below the plane, seen from above) holds its centre
+    of mass and, where it can yield, is at least `bearing_area` (m^2) wide, so that its weight does
+    not crush its foot; the plane rises at most MAX_SINK of its height above its lowest point, where
+    a bearing area still short is left so. Binary search over the points' heights: the support only
+    grows with the plane. An object whose centre of mass no support within MAX_SINK holds stands on
     its lowest point, and falls over as it would.
     """
-    centre = masses @ positions / masses.sum()
-    heights = np.sort(positions[:, 1])
+    centre = (masses @ positions / masses.sum())[[0, 2]]
     order = np.argsort(positions[:, 1])
-    xz = positions[order][:, [0, 2]]
-    lo, hi = 0, int(np.searchsorted(heights, heights[0] + MAX_SINK * (heights[-1] - heights[0]), side="right")) - 1
-    if not _holds(xz[: hi + 1], centre[[0, 2]], margin):
+    heights, xz = positions[order, 1], positions[order][:, [0, 2]]
+    cap = int(np.searchsorted(heights, heights[0] + MAX_SINK * (heights[-1] - heights[0]), side="right")) - 1
+
+    def stands(i: int) -> bool:
+        holds, area = _support(xz[: i + 1], centre, margin)
+        return holds and (area >= bearing_area or i == cap)
+
+    if not stands(cap):
         return float(heights[0])
-    while lo < hi:  # smallest i whose lowest i + 1 points hold the centre
+    lo, hi = 0, cap
+    while lo < hi:  # the smallest i at which the lowest i + 1 points stand
         mid = (lo + hi) // 2
-        if _holds(xz[: mid + 1], centre[[0, 2]], margin):
+        if stands(mid):
             hi = mid
         else:
             lo = mid + 1
     return float(heights[lo])
 
 
-def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray, margin: float) -> float:
+def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray, margin: float,
+                   bearing_areas: dict | None = None) -> float:
     """Height of the ground plane (simulation frame, m): the lowest at which every object it touches stands.
 
     Args:
@@ -85,10 +96,13 @@ def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndar
         masses: (P,) kg.
         object_id: (P,) object of each particle.
         margin: how far inside its support an object's centre of mass must lie, m.
+        bearing_areas: object -> the support (m^2) it needs not to yield under its weight
+            (M g / yield stress); none for elastic and rigid objects.
 
     The object with the lowest point touches the ground; any other object reaching below the
     plane it needs touches it too, and the plane rises to what that one needs.
     """
+    bearing_areas = bearing_areas or {}
     objects = np.unique(object_id)
     lowest = {k: float(positions[object_id == k, 1].min()) for k in objects}
     plane = min(lowest.values())
@@ -98,8 +112,8 @@ def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndar
         if not reach:
             return plane
         touching |= reach
-        plane = max([plane] + [standing_height(positions[object_id == k], masses[object_id == k], margin)
-                               for k in reach])
+        plane = max([plane] + [standing_height(positions[object_id == k], masses[object_id == k], margin,
+                                               bearing_areas.get(int(k), 0.0)) for k in reach])
 
 
 def fundamental_period(material, height: float) -> float:

@@ -114,7 +114,10 @@ class Simulation:
         rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         # the ground: the plane, normal to gravity, on which the objects stand as photographed
-        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, margin=spacing)
+        # a body that yields stands on a foot wide enough to carry its weight below its yield stress
+        bearing = {k: g * float(self.masses[self.object_id == k].sum()) / m.yield_stress
+                   for k, m in enumerate(self.materials) if getattr(m, "yield_stress", None)}
+        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, spacing, bearing)
                          if ground.enabled else None)
         self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, **fit)
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
