@@ -81,28 +81,9 @@ class Simulation:
         fit = dict(gravity=g, duration_s=physics.duration_s, velocities=velocities @ self.Q.T, walls=physics.walls)
 
         # the cell size comes from the Gaussians; the final grid also covers the fill
-        means_sim = means @ self.Q.T
-        dx = domain.fit_grid(means_sim, physics.grid, ground_y=None, **fit).dx
-        fills, gauss_volume = [], np.zeros(len(means))
+        dx = domain.fit_grid(means @ self.Q.T, physics.grid, ground_y=None, **fit).dx
         spacing = lattice_spacing(dx, physics.particles_per_cell)
-        for k in range(len(self.materials)):
-            sel = object_id == k
-            # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
-            # lattice along the camera's axes meets a pitched ground with a staircase that lands on
-            # one side first and spins the body (tests/simulate: a sphere on slip ground).
-            fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, physics.particles_per_cell)
-            if silhouette is not None:  # grow the solid to the photographed silhouette
-                mask, K = silhouette
-                skin = 0.0
-                for _ in range(SKIN_ITERATIONS):  # the growth is in whole lattice cells: measure again
-                    gap = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
-                    if gap < 0.5 * spacing:
-                        break
-                    skin += gap
-                    fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx,
-                                                                       physics.particles_per_cell, skin)
-                log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
-            fills.append((fill @ self.Q, fill_volume, k))
+        fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette)
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
         self.object_id = np.concatenate([object_id] + [np.full(len(f), k) for f, _, k in fills])
@@ -143,6 +124,33 @@ class Simulation:
                  "x".join(map(str, self.grid.shape)), 1e3 * self.grid.dx, self.n_frames)
         self._log_bodies(rest_sim)
         self._check_budget()
+
+    def _fill_objects(self, means: np.ndarray, object_id: np.ndarray, dx: float,
+                      silhouette: tuple | None) -> tuple[list, np.ndarray]:
+        """Each object's interior: [(fill (N,3) world m, fill volumes (N,) m^3, object)], and the Gaussians'
+        volumes (G,) m^3; grown to the photograph's silhouette when it is given."""
+        means_sim = means @ self.Q.T
+        per_cell = self.physics.particles_per_cell
+        spacing = lattice_spacing(dx, per_cell)
+        fills, gauss_volume = [], np.zeros(len(means))
+        for k in range(len(self.materials)):
+            sel = object_id == k
+            # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
+            # lattice along the camera's axes meets a pitched ground with a staircase that lands on
+            # one side first and spins the body (tests/simulate: a sphere on slip ground).
+            fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, per_cell)
+            if silhouette is not None:
+                mask, K = silhouette
+                skin = 0.0
+                for _ in range(SKIN_ITERATIONS):  # the growth is in whole lattice cells: measure again
+                    gap = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
+                    if gap < 0.5 * spacing:
+                        break
+                    skin += gap
+                    fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, per_cell, skin)
+                log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
+            fills.append((fill @ self.Q, fill_volume, k))
+        return fills, gauss_volume
 
     def _check_budget(self) -> None:
         """Refuse, before any work, a run whose substeps or recorded frames cannot be afforded; log the estimate."""
