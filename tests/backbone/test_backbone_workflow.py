@@ -172,5 +172,8 @@ def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run
     trajectories = read_artifact(out / "trajectories.h5", TrajectoriesArtifact)
     energy = (out / "report" / "energy.svg").read_text()
     assert energy.count("<polyline") == 3 and energy.count(",") >= 3 * len(trajectories.time_s)
-    loss_terms = read_artifact(out / "gaussians.h5", GaussiansArtifact).loss_terms
-    assert all(f">{term}<" in (out / "report" / "loss.svg").read_text() for term in loss_terms)
+    gaussians = read_artifact(out / "gaussians.h5", GaussiansArtifact)
+    used = [t for i, t in enumerate(gaussians.loss_terms) if np.isfinite(gaussians.loss[:, i]).any()]  # NaN: unused
+    loss = (out / "report" / "loss.svg").read_text()
+    assert "total" in used and all(f">{term}<" in loss for term in used)
+    assert loss.count("<polyline") == len(used)
