@@ -2,7 +2,7 @@
 from pathlib import Path
 
 from stages.setup.preview import PREVIEW_KEYS, preview_scene
-from stages.setup.scene_file import dump_scene, leading_comments
+from stages.setup.scene_file import dump_scene, leading_comments, without_empty_sections
 
 
 def test_preview_lowers_the_cost_keys_only():
@@ -26,3 +26,8 @@ def test_scene_text_reads_like_the_examples():
     assert "- box: [1, 2, 3, 4]\n" in text and "material: {preset: metal}" in text
     assert "- {type: impulse, region: {box: [0, 0, 0, 1, 1, 1]}, velocity: [1.0, -2.0, 0.0]}" in text
     assert leading_comments("# one\n# two\nimage: x\n# not this\n") == "# one\n# two\n"
+
+
+def test_sections_left_at_their_defaults_are_not_written():
+    raw = {"image": "p.png", "objects": [{}], "camera": {}, "enhance": {"diffusion": {"lora": {}}, "relight": False}}
+    assert without_empty_sections(raw) == {"image": "p.png", "objects": [{}], "enhance": {"relight": False}}
