@@ -15,7 +15,6 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import numpy as np
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
