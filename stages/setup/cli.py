@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import logging
 import shutil
 from pathlib import Path
 
@@ -73,7 +72,6 @@ def serve(args: argparse.Namespace) -> None:
     host, port = sock.getsockname()[:2]
     shown = f"[{host}]" if family == socket.AF_INET6 else host
     print(f"pm-setup: scene folder {setup.folder}\npm-setup: open http://{shown}:{port}/", flush=True)
-    logging.getLogger("uvicorn.error").setLevel(logging.WARNING)
     uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False)).run(sockets=[sock])
 
 

@@ -3,7 +3,7 @@
 pm-reconstruct, pm-simulate and pm-render run one after another on a copy of scene.yaml whose
 resolution, iterations, grid, particle density, frame rate and video width are lowered to
 PREVIEW_KEYS; every other key (materials, conditions, camera, duration) is the scene's own. The
-frames come from coarse.h5. A stage that refuses its input ends the preview with that stage's
+frames come from coarse.h5, laid over the background pm-reconstruct filled in. A stage that refuses its input ends the preview with that stage's
 own one-paragraph message.
 """
 from __future__ import annotations
@@ -25,7 +25,9 @@ from typing import Optional
 import cv2
 import yaml
 
-from schemas.artifacts import CoarseArtifact, read_artifact
+import numpy as np
+
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact, read_artifact
 
 PREVIEW_KEYS = {
     "reconstruct": {"resolution": 96, "iterations": 40},
@@ -152,12 +154,18 @@ class Preview:
         self.seconds = time.perf_counter() - started
 
     def _write_frames(self) -> list[str]:
+        """PNG frames: the coarse render (colour composited on black, so premultiplied) over the background."""
         coarse = read_artifact(self.workdir / "coarse.h5", CoarseArtifact)
+        background = read_artifact(self.workdir / "gaussians.h5", GaussiansArtifact).background
+        height, width = coarse.rgb.shape[1:3]
+        background = cv2.resize(background, (width, height), interpolation=cv2.INTER_AREA).astype(np.float32)
         self.fps = float(coarse.fps)
         names = []
-        for t, rgb in enumerate(coarse.rgb):
+        for t, (rgb, alpha) in enumerate(zip(coarse.rgb, coarse.alpha)):
+            frame = rgb + (1 - np.clip(alpha, 0, 1))[..., None] * background
             names.append(f"frame_{t:03d}.png")
-            cv2.imwrite(str(self.workdir / names[-1]), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+            cv2.imwrite(str(self.workdir / names[-1]), cv2.cvtColor(np.clip(frame + 0.5, 0, 255).astype(np.uint8),
+                                                                     cv2.COLOR_RGB2BGR))
         return names
 
 

@@ -98,16 +98,31 @@ def check_scene(folder: Path, raw: dict, check_files: bool = True) -> Optional[I
     return None
 
 
-def save_scene(folder: Path, raw: dict, header: str = "") -> None:
-    """Write ``raw`` as the folder's scene.yaml, atomically, after load_scene accepted it.
+def without_empty_sections(value):
+    """``value`` less the empty mappings inside mappings (a section the page opened but left at its defaults);
+    list items stay, since `objects: [{}]` is one object with every default."""
+    if isinstance(value, dict):
+        pruned = {k: without_empty_sections(v) for k, v in value.items()}
+        return {k: v for k, v in pruned.items() if not (isinstance(v, dict) and not v)}
+    if isinstance(value, list):
+        return [without_empty_sections(v) for v in value]
+    return value
 
+
+def save_scene(folder: Path, raw: dict, header: str = "") -> dict:
+    """Write ``raw`` (less its empty sections) as the folder's scene.yaml, atomically, after load_scene accepted it.
+
+    Returns:
+        the mapping written.
     Raises:
         InputError: the loader's, and scene.yaml is left as it was.
     """
+    raw = without_empty_sections(raw)
     error = check_scene(folder, raw)
     if error is not None:
         raise error
     atomic_write(folder / SCENE_FILE, dump_scene(raw, header).encode())
+    return raw
 
 
 def decode_image(data: bytes, what: str) -> np.ndarray:

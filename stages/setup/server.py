@@ -15,7 +15,6 @@ import tempfile
 from pathlib import Path
 from typing import Optional
 
-import cv2
 import numpy as np
 from starlette.applications import Starlette
 from starlette.concurrency import run_in_threadpool
@@ -207,10 +206,9 @@ class SetupApp:
                 strokes = sf.decode_image(sf.data_url_bytes(url, "hints"), sf.hints_name(k)) if url else None
                 if 0 <= k < len(raw.get("objects") or []):
                     sf.set_hints(self.folder, raw, k, strokes, photo[0].shape[:2])
-            await run_in_threadpool(sf.save_scene, self.folder, raw, self.header)
+            self.raw = await run_in_threadpool(sf.save_scene, self.folder, raw, self.header)
         except InputError as err:
             return error_json(err)
-        self.raw = raw
         return JSONResponse(self.scene_state())
 
     async def start_preview(self, request: Request) -> Response:

@@ -92,12 +92,13 @@ def jobs_after_edit(workdir: Path, edit) -> dict:
 @pytest.mark.slow
 def test_editing_physics_reruns_all_but_reconstruct(finished_run):
     plan = jobs_after_edit(finished_run, lambda s: s["physics"].update(duration_s=0.125))
-    assert plan == {"simulate": 1, "render": 1, "enhance": 1}
+    assert plan == {"simulate": 1, "render": 1, "enhance": 1, "plots": 1}  # plots: the report's, after the video
 
 
 @pytest.mark.slow
 def test_editing_enhance_reruns_only_enhance(finished_run):
-    assert jobs_after_edit(finished_run, lambda s: s["enhance"].update(confidence_threshold=0.7)) == {"enhance": 1}
+    assert jobs_after_edit(finished_run, lambda s: s["enhance"].update(confidence_threshold=0.7)) == {"enhance": 1,
+                                                                                                      "plots": 1}
 
 
 @pytest.mark.slow
@@ -148,7 +149,7 @@ def test_diffusion_scene_plans_lora_and_invert(tmp_path):
     raw["enhance"] = {"backend": "diffusion", "diffusion": {"lora": {"enabled": True}}}
     scene.write_text(yaml.safe_dump(raw))
     assert planned_jobs(tmp_path) == {"reconstruct": 1, "simulate": 1, "render": 1, "lora": 1, "invert": 1,
-                                      "enhance": 1}
+                                      "enhance": 1, "plots": 1}
     raw["enhance"]["diffusion"]["lora"]["enabled"] = False
     scene.write_text(yaml.safe_dump(raw))
     assert "lora" not in planned_jobs(tmp_path)
@@ -172,5 +173,8 @@ def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run
     trajectories = read_artifact(out / "trajectories.h5", TrajectoriesArtifact)
     energy = (out / "report" / "energy.svg").read_text()
     assert energy.count("<polyline") == 3 and energy.count(",") >= 3 * len(trajectories.time_s)
-    loss_terms = read_artifact(out / "gaussians.h5", GaussiansArtifact).loss_terms
-    assert all(f">{term}<" in (out / "report" / "loss.svg").read_text() for term in loss_terms)
+    gaussians = read_artifact(out / "gaussians.h5", GaussiansArtifact)
+    used = [t for i, t in enumerate(gaussians.loss_terms) if np.isfinite(gaussians.loss[:, i]).any()]  # NaN: unused
+    loss = (out / "report" / "loss.svg").read_text()
+    assert "total" in used and all(f">{term}<" in loss for term in used)
+    assert loss.count("<polyline") == len(used)

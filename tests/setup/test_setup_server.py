@@ -5,7 +5,6 @@ import json
 import shutil
 import socket
 import time
-from pathlib import Path
 from urllib.parse import urlparse
 
 import cv2

@@ -33,11 +33,7 @@ async function adopt(data) {
   app.presetDefs = mapping(Forms.resolve(defs.ObjectConfig).properties.material);
   app.defaults = { fov: defs.CameraConfig.properties.fov_deg.default, pitch: defs.CameraConfig.properties.pitch_deg.default,
                    size: defs.ObjectConfig.properties.size_m.default };
-  app.scene = data.scene && Object.keys(data.scene).length ? data.scene : { objects: [{}] };
-  app.scene.objects = app.scene.objects || [{}];
-  app.scene.physics = app.scene.physics || {};
-  app.scene.physics.conditions = app.scene.physics.conditions || [];
-  app.scene.camera = app.scene.camera || {};
+  app.scene = withSections(data.scene);
   $("folder").textContent = data.folder;
   app.masks = []; app.hints = [];
   app.selObject = Math.min(app.selObject, app.scene.objects.length - 1);
@@ -60,6 +56,16 @@ async function adopt(data) {
   redraw();
   if (data.error) Forms.showError(data.error.field, data.error.message);
   status(data.saved ? "saved scene.yaml loaded" : "new scene: not saved yet");
+}
+
+// The scene mapping with the sections the page edits in place (a saved file leaves out those at their defaults).
+function withSections(scene) {
+  scene = scene && Object.keys(scene).length ? scene : { objects: [{}] };
+  scene.objects = scene.objects || [{}];
+  scene.physics = scene.physics || {};
+  scene.physics.conditions = scene.physics.conditions || [];
+  scene.camera = scene.camera || {};
+  return scene;
 }
 
 // {tag: def name} of a discriminated union, from pydantic's schema (discriminator.mapping).
@@ -426,7 +432,7 @@ async function save() {
     return false;
   }
   Forms.clearErrors();
-  app.scene = data.scene;
+  app.scene = withSections(data.scene);
   renderPanel();
   redraw();
   status(`saved ${data.folder}/scene.yaml`);
