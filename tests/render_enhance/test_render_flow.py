@@ -8,8 +8,8 @@ import torch
 import splat
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from stages.enhance.flow import band_limited_upsample, enhance_frames, photograph_at, sample_at
-from stages.simulate.render import render_camera, render_video
-from stages.simulate.source_map import map_moments, source_points, source_spread
+from stages.render.render import render_camera, render_video
+from stages.render.source_map import map_moments, source_points, source_spread
 
 W, H, FOCAL, DEPTH = 48, 40, 60.0, 1.0
 
