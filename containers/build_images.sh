@@ -2,7 +2,7 @@
 # Builds the stage images physmotion/<stage>:<version> from stages/*/Dockerfile, on a machine whose
 # Docker engine cannot pull from a registry (no python:3.11-slim) and may not reach PyTorch's index.
 #
-#   sh containers/build_images.sh                          # reconstruct, simulate and enhance
+#   sh containers/build_images.sh                          # reconstruct, simulate, render and enhance
 #   TORCH_WHEEL=/opt/wheels/torch-2.13.0+cpu-cp311-cp311-manylinux_2_28_x86_64.whl \
 #       sh containers/build_images.sh simulate             # torch from a local wheel
 #
@@ -20,7 +20,7 @@ PYTHON=${PYTHON:-python3}
 if ! docker image inspect "$BASE" >/dev/null 2>&1; then
     case $BASE in physmotion/base:*) sh containers/make_base_image.sh "$BASE" ;; esac   # others are pulled
 fi
-set -- ${*:-reconstruct simulate enhance}
+set -- ${*:-reconstruct simulate render enhance}
 ARGS="--network host --build-arg BASE=$BASE"
 
 if [ -n "${TORCH_WHEEL:-}" ]; then

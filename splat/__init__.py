@@ -1,4 +1,5 @@
-"""Differentiable Gaussian rasterizer (Warp kernels, torch autograd) and 3DGS PLY I/O.
+"""Differentiable Gaussian rasterizer (Warp kernels, torch autograd); it reads and writes no files
+(the 3DGS PLY format is schemas.ply).
 
 Standard 3DGS semantics (DESIGN.md, "Rasterizer"): EWA projection with 0.3 px
 dilation, alpha clamped to 0.99, a Gaussian reaches the pixels where its alpha
@@ -12,8 +13,6 @@ _wp.init()  # from_torch and launches need the runtime; init is idempotent
 
 from .camera import Camera
 from .covariance import covariances_from_scales_rotations
-from .ply import GaussianCloud, read_ply, write_ply
 from .rasterize import Render, rasterize
 
-__all__ = ["Camera", "GaussianCloud", "Render", "covariances_from_scales_rotations", "rasterize", "read_ply",
-           "write_ply"]
+__all__ = ["Camera", "Render", "covariances_from_scales_rotations", "rasterize"]

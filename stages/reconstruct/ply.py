@@ -19,7 +19,7 @@ import numpy as np
 from scipy.optimize import brentq
 from scipy.spatial.transform import Rotation
 
-import splat
+from schemas.ply import read_ply
 
 from .lift import Gaussians
 
@@ -42,7 +42,7 @@ def _distance_for_extent(means: np.ndarray, focal: float, extent_px: float) -> f
 
 def place_ply(path: Path, mask: np.ndarray, K: np.ndarray, size_m: float, object_id: int = 0) -> Gaussians:
     """Gaussians of the PLY at ``path`` placed onto the object ``mask`` (H,W bool) of the camera ``K`` (3,3)."""
-    cloud = splat.read_ply(path)
+    cloud = read_ply(path)
     means = OPENGL_TO_CAMERA.apply(cloud.means.astype(np.float64))
     rotations = (OPENGL_TO_CAMERA * Rotation.from_quat(cloud.rotations, scalar_first=True)).as_quat(scalar_first=True)
     low, high = means.min(0), means.max(0)

@@ -1,4 +1,4 @@
-"""pm-simulate: MLS-MPM simulation of the reconstructed objects (and pm-render).
+"""pm-simulate: MLS-MPM simulation of the reconstructed objects.
 
 PHYSMOTION_WARP_DEBUG=1 compiles every Warp kernel loaded in this process in
 Warp's debug mode, where array indexing is bounds-checked: an index off the

@@ -9,7 +9,7 @@ from schemas.artifacts import read_header
 from stages.enhance.cli import main as enhance
 from stages.reconstruct.cli import main as reconstruct
 from stages.simulate.cli import main as simulate
-from stages.simulate.render_cli import main as render
+from stages.render.cli import main as render
 
 from .conftest import write_scene
 

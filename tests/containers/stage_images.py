@@ -19,8 +19,8 @@ def docker(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
 def why_unavailable() -> str | None:
     """None when the images can be built and run here, else why not."""
     if os.environ.get(OPT_IN) != "1":
-        return (f"opt-in: set {OPT_IN}=1 to build the three stage images (about 11 minutes on 2 cores whenever "
-                "the code or README changed, Docker's cache otherwise) and run six containers (about 7 minutes); "
+        return (f"opt-in: set {OPT_IN}=1 to build the four stage images (about 11 minutes on 2 cores whenever "
+                "the code or README changed, Docker's cache otherwise) and run seven containers (about 7 minutes); "
                 "TORCH_WHEEL=path takes torch from a local wheel, BASE=image names the base image")
     if not shutil.which("docker"):
         return "no docker command"
@@ -39,7 +39,7 @@ def why_unavailable() -> str | None:
 
 
 def build_images() -> None:
-    """Builds (or finds in Docker's cache) physmotion/{reconstruct,simulate,enhance} from this tree."""
+    """Builds (or finds in Docker's cache) physmotion/{reconstruct,simulate,render,enhance} from this tree."""
     proc = subprocess.run(["sh", str(REPO / "containers" / "build_images.sh")], capture_output=True, text=True,
                           timeout=3600)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]

@@ -103,7 +103,7 @@ def stage_modules(stage: str) -> set[str]:
 
 
 def test_every_stage_has_an_image():
-    assert STAGES == ["enhance", "reconstruct", "simulate"]
+    assert STAGES == ["enhance", "reconstruct", "render", "simulate"]
 
 
 @pytest.mark.parametrize("stage", STAGES)
@@ -114,7 +114,7 @@ def test_dockerfile_installs_what_its_stage_imports(stage):
     assert not missing, f"stages/{stage} (with schemas and splat) imports modules that its image lacks: {missing}"
 
 
-@pytest.mark.parametrize("stage", ["reconstruct", "simulate"])
+@pytest.mark.parametrize("stage", ["reconstruct", "render", "simulate"])
 def test_images_without_diffusion_hold_no_diffusers(stage):
     extras, others = dockerfile_install(stage)
     assert "diffusers" not in declared_distributions(extras) | others

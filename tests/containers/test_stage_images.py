@@ -23,14 +23,14 @@ S, R = "scenes/tiny/scene.yaml", "results/tiny"
 # The workflow's commands for one scene, grouped by the image their rules name.
 CHAIN = {
     "reconstruct": [["pm-reconstruct", "--scene", S, "--out", f"{R}/gaussians.h5"]],
-    "simulate": [["pm-simulate", "--scene", S, "--gaussians", f"{R}/gaussians.h5", "--out", f"{R}/trajectories.h5"],
-                 ["pm-render", "--scene", S, "--gaussians", f"{R}/gaussians.h5", "--trajectories",
-                  f"{R}/trajectories.h5", "--out", f"{R}/coarse.h5", "--video", f"{R}/coarse.mp4"]],
+    "simulate": [["pm-simulate", "--scene", S, "--gaussians", f"{R}/gaussians.h5", "--out", f"{R}/trajectories.h5"]],
+    "render": [["pm-render", "--scene", S, "--gaussians", f"{R}/gaussians.h5", "--trajectories",
+                f"{R}/trajectories.h5", "--out", f"{R}/coarse.h5", "--video", f"{R}/coarse.mp4"]],
     "enhance": [["pm-enhance", "--scene", S, "--coarse", f"{R}/coarse.h5", "--gaussians", f"{R}/gaussians.h5",
                  "--out", f"{R}/video.mp4"]],
 }
 # Each image's programs: every image has the scripts of all six (one pyproject), but only these run.
-PROGRAMS = {"reconstruct": ["pm-reconstruct"], "simulate": ["pm-simulate", "pm-render"],
+PROGRAMS = {"reconstruct": ["pm-reconstruct"], "simulate": ["pm-simulate"], "render": ["pm-render"],
             "enhance": ["pm-enhance", "pm-lora", "pm-invert"]}
 # Which stage packages and whether diffusers the image holds, as one JSON line.
 PROBE = ("import importlib.util as u, json; print(json.dumps({'stages': [s for s in %r if u.find_spec('stages.' + s)], "

@@ -7,6 +7,7 @@ from scipy.spatial.transform import Rotation
 
 import splat
 from schemas.artifacts import GaussiansArtifact, read_artifact
+from schemas.ply import GaussianCloud, write_ply
 from stages.reconstruct.cli import main
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
@@ -81,8 +82,7 @@ def test_init_ply_is_placed_onto_the_mask(tmp_path, artifact_path):
     to_opengl = Rotation.from_euler("x", 180, degrees=True)
     means = to_opengl.apply(g.means - g.means.mean(0)) * 7.0
     rotations = (to_opengl * Rotation.from_quat(g.rotations, scalar_first=True)).as_quat(scalar_first=True)
-    splat.write_ply(tmp_path / "cloud.ply", splat.GaussianCloud(means, g.scales * 7.0, rotations, g.opacities,
-                                                                 g.colors))
+    write_ply(tmp_path / "cloud.ply", GaussianCloud(means, g.scales * 7.0, rotations, g.opacities, g.colors))
     cv2.imwrite(str(tmp_path / "photo.png"), cv2.cvtColor(g.photo, cv2.COLOR_RGB2BGR))
     cv2.imwrite(str(tmp_path / "mask.png"), g.mask * 255)
     (tmp_path / "scene.yaml").write_text(

@@ -13,7 +13,7 @@ rule render:
     benchmark:
         RESULTS / "{scene}" / "benchmarks" / "render.tsv"
     container:
-        image("simulate")
+        image("render")
     threads: 2
     resources:
         mem_mb=4000,

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from plyfile import PlyData, PlyElement, PlyParseError
 
-from schemas.program import InputError
+from .program import InputError
 
 log = logging.getLogger(__name__)
 
