@@ -22,5 +22,5 @@ rule plots:
         benchmarks=lambda w: str(RESULTS / w.scene / "benchmarks"),
         out=lambda w: str(RESULTS / w.scene / "report"),
     shell:
-        "pm-plots --gaussians {input.gaussians} --trajectories {input.trajectories} --benchmarks {params.benchmarks}"
-        " --out {params.out}"
+        "pm-plots --gaussians {input.gaussians:q} --trajectories {input.trajectories:q}"
+        " --benchmarks {params.benchmarks:q} --out {params.out:q}"
