@@ -3,7 +3,7 @@
 `Simulation` builds the particles (the G Gaussians first, then each object's
 interior fill), the simulation frame and grid, the materials, conditions and
 rigid bodies, then `run` steps the MPM solver frame by frame with CFL substeps
-and records positions, every particle's deformation gradient and diagnostics,
+and records positions, the Gaussians' deformation gradients and diagnostics,
 all in the world (camera) frame.
 """
 from __future__ import annotations
@@ -121,7 +121,7 @@ class Simulation:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
         T, G, P = self.n_frames, self.n_gaussians, len(self.masses)
         positions = np.zeros((T, P, 3), np.float32)
-        F = np.zeros((T, P, 3, 3), np.float32)
+        F = np.zeros((T, G, 3, 3), np.float32)
         diag = {k: np.zeros((T,) + s) for k, s in [("kinetic_energy", ()), ("potential_energy", ()), ("momentum", (3,)),
                                                    ("angular_momentum", (3,)), ("max_speed", ()), ("substeps", ())]}
         times = np.arange(T) / self.physics.fps
@@ -148,13 +148,13 @@ class Simulation:
             fps=float(self.physics.fps), duration_s=float(self.physics.duration_s), **diag)
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:
-        """Store frame f: world positions, world F of every particle, and the diagnostics."""
+        """Store frame f: world positions, world F of the Gaussians, and the diagnostics."""
         s = self.solver
         x_sim = s.x.numpy().astype(np.float64)
         v = s.v.numpy().astype(np.float64) @ self.Q  # world = Q^T sim, for row vectors
         x = x_sim @ self.Q
         positions[f] = x
-        F[f] = self.Q.T @ s.F.numpy() @ self.Q
+        F[f] = self.Q.T @ s.F.numpy()[: self.n_gaussians] @ self.Q
         m = self.masses
         wp.launch(elastic_energy, dim=len(m), device=self.device,
                   inputs=[s.materials, s.object_id, s.volume, s.F, s.history, self._energy])
