@@ -23,8 +23,8 @@ Each object's volume is filled with particles behind its Gaussians; every object
 material preset (jelly, metal, sand, plasticine, foam, snow, rigid, fracture); the scene's
 conditions (impulse, velocity, force, torque, fixed) act on regions of the objects; the ground
 is the plane normal to gravity through the lowest point. Substeps follow a CFL bound unless
-physics.dt is set. Writes trajectories.h5 (positions and deformation gradients of every
-particle, per-frame energies and momenta) and setup.png beside it (the
+physics.dt is set. Writes trajectories.h5 (positions of every particle, the deformation
+gradient of every Gaussian, per-frame energies and momenta) and setup.png beside it (the
 objects, ground, regions and arrows over the photograph: check it before a long run)."""
 
 
