@@ -21,9 +21,13 @@ DESCRIPTION = """\
 Simulate the reconstructed objects with MLS-MPM (APIC, quadratic B-splines, Warp kernels).
 Each object's volume is filled with particles behind its Gaussians; every object has its own
 material preset (jelly, metal, sand, plasticine, foam, snow, rigid, fracture); the scene's
-conditions (impulse, velocity, force, torque, fixed) act on regions of the objects; the ground
-is the plane normal to gravity through the lowest point. Substeps follow a CFL bound unless
-physics.dt is set. Writes trajectories.h5 (positions of every particle, the deformation
+conditions (impulse, velocity, force, torque, fixed) act on regions of the objects, their vectors
+and regions read along gravity (x right, y down, z away; `frame: camera` for the camera's axes).
+The ground is the plane normal to gravity on which the objects stand on their centres of mass,
+and the bodies settle into their own weight before t = 0, so that with no condition nothing
+moves; the grid follows the bodies, and only the ground and physics.walls stop them. Substeps
+follow a CFL bound unless physics.dt is set; a run above physics.max_substeps_per_frame is
+refused before it starts. Writes trajectories.h5 (positions of every particle, the deformation
 gradient of every Gaussian, per-frame energies and momenta) and setup.png beside it (the
 objects, ground, regions and arrows over the photograph: check it before a long run)."""
 
