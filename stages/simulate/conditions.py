@@ -22,6 +22,8 @@ import warp as wp
 
 from schemas import InputError
 
+from .domain import condition_frame
+
 
 def region_members(region, positions: np.ndarray) -> np.ndarray:
     """Boolean (N,) membership of an object's rest positions (N,3, in the condition's frame) in a scene region."""
@@ -111,7 +113,7 @@ class Conditions:
         self.masses = masses
         self.items: list[_Active] = []
         for i, c in enumerate(conditions):
-            to_frame = np.eye(3) if c.frame == "camera" else gravity_frame  # world -> the condition's frame
+            to_frame = condition_frame(c, gravity_frame)  # world -> the condition's frame
             obj = np.flatnonzero(object_id == c.object)
             idx = obj[region_members(c.region, rest_world[obj] @ to_frame.T)]
             if len(idx) == 0:

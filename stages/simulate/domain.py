@@ -64,6 +64,12 @@ def gravity_frame(Q: np.ndarray) -> np.ndarray:
     return np.diag([1.0, -1.0, -1.0]) @ Q
 
 
+def condition_frame(condition, gravity_frame_rows: np.ndarray) -> np.ndarray:
+    """Rotation (3,3) taking world vectors into the frame a condition is written in (rows: its axes in
+    the world frame): the gravity-aligned frame, or the camera's (the world's) with `frame: camera`."""
+    return np.eye(3) if condition.frame == "camera" else gravity_frame_rows
+
+
 def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: float, velocities: np.ndarray,
              ground_y: float | None, walls: bool) -> Grid:
     """Grid over the rest particles plus room for the motion expected in `duration_s`.

@@ -395,6 +395,7 @@ class MPMSolver:
         self.F = wp.array(np.tile(np.eye(3, dtype=np.float32), (n, 1, 1)), dtype=wp.mat33, device=device)
         self.volume_stress = wp.zeros(n, dtype=wp.mat33, device=device)
         self.mass = wp.array(np.asarray(masses, np.float32), dtype=float, device=device)
+        self._host_mass = np.asarray(masses, np.float64)  # follow() weighs the particles every few substeps
         self.volume = wp.array(np.asarray(volumes, np.float32), dtype=float, device=device)
         self.object_id = wp.array(np.asarray(object_id, np.int32), dtype=wp.int32, device=device)
         self._history0 = np.array([initial_history(m) for m in materials], np.float32)[np.asarray(object_id)]
@@ -544,7 +545,7 @@ class MPMSolver:
         fits = (hi - lo) <= (shape - 1 - 2 * inner) * dx
         low_shift = np.floor((lo - origin) / dx - inner)  # cells the grid may move up and keep lo inside
         high_shift = np.ceil((hi - origin) / dx - (shape - 1 - inner))  # cells it must move to hold hi
-        centre = self.mass.numpy() @ x / float(np.sum(self.mass.numpy()))
+        centre = self._host_mass @ x / self._host_mass.sum()
         centred = np.round((centre - origin) / dx - (shape - 1) / 2)
         shift = np.where(fits, np.where(high_shift > 0, high_shift, np.minimum(low_shift, 0)), centred)
         new = origin + shift * dx

@@ -74,8 +74,9 @@ class Simulation:
         self.Q = domain.simulation_rotation(domain.down_direction(self.gravity_world, pitch_deg))
         self.gravity_frame = domain.gravity_frame(self.Q)
         g = float(np.linalg.norm(self.gravity_world))
-        velocities = np.array([self._condition_vector(c, c.velocity) for c in physics.conditions
-                               if c.type in ("impulse", "velocity")], dtype=np.float64).reshape(-1, 3)
+        velocities = np.array([domain.condition_frame(c, self.gravity_frame).T @ np.asarray(c.velocity)
+                               for c in physics.conditions if c.type in ("impulse", "velocity")],
+                              dtype=np.float64).reshape(-1, 3)  # world frame
         self.speed_hint = float(np.max(np.linalg.norm(velocities, axis=1), initial=0.0))
         ground = physics.ground
         fit = dict(gravity=g, duration_s=physics.duration_s, velocities=velocities @ self.Q.T, walls=physics.walls)
@@ -192,12 +193,6 @@ class Simulation:
         return ("lower that youngs_modulus or raise its density (the elastic wave speed sqrt(E / density) sets "
                 "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
 
-    def _condition_vector(self, condition, vector) -> np.ndarray:
-        """A condition's vector in the world (camera) frame: it is written in the gravity-aligned frame
-        unless the condition says `frame: camera`."""
-        vector = np.asarray(vector, np.float64)
-        return vector if condition.frame == "camera" else self.gravity_frame.T @ vector
-
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
         """Each object's mass, volume and principal moments of inertia about its centre of mass."""
         for k, material in enumerate(self.materials):
@@ -214,9 +209,12 @@ class Simulation:
                      1e3 * sunk)
 
     def substep_size(self, max_speed: float) -> float:
-        """physics.dt, or the CFL substep for particles up to max_speed (m/s) plus a frame of free fall."""
-        if self.physics.dt is not None:
-            return self.physics.dt
+        """physics.dt, or the CFL substep for particles up to max_speed (m/s)."""
+        return self.physics.dt if self.physics.dt is not None else self._cfl_substep(max_speed)
+
+    def _cfl_substep(self, max_speed: float) -> float:
+        """The CFL substep in s for particles up to max_speed (m/s), what a condition may give, and a frame
+        of free fall."""
         fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
         return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall)
 
@@ -243,9 +241,7 @@ class Simulation:
         still = held | ~np.isin(self.object_id, deformable)
         s.prescribed.assign(still.astype(np.int32))
         s.prescribed_velocity.zero_()
-        # the CFL bound even under a physics.dt: a dt that blows the run up is reported by the run itself
-        fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
-        dt = domain.cfl_substep(self.grid.dx, self.materials, self.speed_hint + fall)
+        dt = self._cfl_substep(0.0)  # even under a physics.dt: a dt that blows up is the run's to report
         relaxation = rest_state.Relaxation(self.masses)
         started, steps = time.perf_counter(), 0
         while steps * dt < rest_state.SETTLE_PERIODS * period:
