@@ -19,9 +19,9 @@ break that if taken as they are:
   settle (simulation.Simulation.settle, `Relaxation`) finds the stress of the
   loaded state: the bodies sink under gravity by dynamic relaxation, and then
   every particle goes back to its photographed place and rest, keeping its
-  elastic deformation gradient and material history. To first order in the deflection that stress holds
-  the photographed shape up against gravity, so at t = 0 the bodies are at
-  rest in the shape of the photograph.
+  elastic deformation gradient and material history. To first order in the
+  deflection that stress holds the photographed shape up against gravity, so
+  at t = 0 the bodies are at rest in the shape of the photograph.
 """
 from __future__ import annotations
 
