@@ -173,6 +173,7 @@ class Simulation:
                              "lower physics.particles_per_cell or physics.grid")
         log.info("about %d substeps per frame at rest (%d in all; more while things move fast), %.2f GiB of frames",
                  per_frame, total, frames_bytes / 2 ** 30)
+        self._substeps_at_rest = total
 
     def _substep_cause(self) -> str:
         """The scene key that sets the substep: physics.dt, a condition's velocity, or the stiffest material."""
@@ -252,9 +253,12 @@ class Simulation:
         sag = float(np.max(rest_sim[:, 1] - s.x.numpy()[:, 1]))
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
         self._rest_F_inverse = np.linalg.inv(s.F.numpy()[: self.n_gaussians].astype(np.float64))
+        elapsed = time.perf_counter() - started
         log.info("settled objects %s into their weight: %d substeps (%.3f s, %d kinetic peaks, the last %.1e of "
                  "the first), largest sag %.2f mm, taken as the photographed shape's load (%.0f s)", deformable,
-                 steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, time.perf_counter() - started)
+                 steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, elapsed)
+        log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
+                 self._substeps_at_rest * elapsed / steps, self._substeps_at_rest, 1e3 * elapsed / steps)
 
     def run(self) -> TrajectoriesArtifact:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
