@@ -23,19 +23,11 @@ import numpy as np
 from schemas import load_scene
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
+from stages.simulate.rest_state import turn_deg
 from stages.simulate.simulation import Simulation
 
 PRESET_MODELS = {"jelly": M.Jelly, "metal": M.Metal, "sand": M.Sand, "plasticine": M.Plasticine, "foam": M.Foam,
                  "snow": M.Snow, "rigid": M.Rigid, "fracture": M.Fracture}
-
-
-def turn_deg(rest: np.ndarray, now: np.ndarray, w: np.ndarray) -> float:
-    """Angle in degrees of the best rotation taking the weighted centred rest points (N,3) onto now (N,3)."""
-    a = rest - w @ rest / w.sum()
-    b = now - w @ now / w.sum()
-    U, _, Vt = np.linalg.svd((b * w[:, None]).T @ a)
-    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-    return float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
 
 
 def drift(sim: Simulation, tr) -> dict:

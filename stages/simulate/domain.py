@@ -70,38 +70,29 @@ def condition_frame(condition, gravity_frame_rows: np.ndarray) -> np.ndarray:
     return np.eye(3) if condition.frame == "camera" else gravity_frame_rows
 
 
-def fit_grid(rest_sim: np.ndarray, cells: int, *, gravity: float, duration_s: float, velocities: np.ndarray,
-             ground_y: float | None, walls: bool) -> Grid:
-    """Grid over the rest particles plus room for the motion expected in `duration_s`.
+def fit_grid(rest_sim: np.ndarray, cells: int, *, ground_y: float | None, walls: bool) -> Grid:
+    """Grid over the rest particles with room for them to deform: half the objects' size on each
+    side (a heap spreads, a body tips over), a quarter above and, without a ground, below; with
+    walls a quarter all round (the walls are its faces).
 
     Args:
         rest_sim: (P,3) rest positions in the simulation frame, m.
         cells: grid cells along the longest side of the domain (physics.grid).
-        gravity: |g|, m/s^2.
-        velocities: (N,3) velocities the conditions give (simulation frame), m/s.
         ground_y: height of the ground plane (simulation frame, m; at or above the lowest rest
             point, rest_state.support_height), or None without a ground.
         walls: close the domain tightly around the objects.
 
-    Each side gets room for the travel of the conditions' velocities toward
-    it, between half and twice the objects' size (a quarter above and for
-    walls), so a wild condition cannot dilute the resolution. The grid is not
-    a wall: it follows the particles (mpm.MPMSolver.follow), unless `walls`.
-    The ground lies exactly on a node plane.
+    Travel needs no room: without walls the grid follows the particles by whole cells
+    (mpm.MPMSolver.follow), so the cell size is set by the objects alone and a fast condition
+    cannot dilute the resolution. The ground lies exactly on a node plane.
     """
     lo, hi = rest_sim.min(axis=0), rest_sim.max(axis=0)
     size = float(max(hi - lo))
-    v = np.vstack([np.zeros((1, 3)), velocities])
-    travel_hi = np.max(np.maximum(v, 0.0), axis=0) * duration_s
-    travel_lo = np.max(np.maximum(-v, 0.0), axis=0) * duration_s
-    margin_hi = np.clip(0.5 * size + travel_hi, 0.5 * size, 2.0 * size)
-    margin_lo = np.clip(0.5 * size + travel_lo, 0.5 * size, 2.0 * size)
-    rise = travel_hi[1] ** 2 / (2.0 * gravity * duration_s ** 2) if gravity > 0 else travel_hi[1]
-    margin_hi[1] = np.clip(0.25 * size + rise, 0.25 * size, 2.0 * size)
-    fall = 0.5 * gravity * duration_s ** 2 + travel_lo[1]
-    margin_lo[1] = 0.0 if ground_y is not None else np.clip(0.25 * size + fall, 0.25 * size, 2.0 * size)
-    if walls:
-        margin_lo[[0, 2]] = margin_hi[[0, 2]] = 0.25 * size
+    margin_lo = np.full(3, 0.25 * size if walls else 0.5 * size)
+    margin_hi = margin_lo.copy()
+    margin_hi[1] = margin_lo[1] = 0.25 * size
+    if ground_y is not None:
+        margin_lo[1] = 0.0
     extent = (hi - lo) + margin_lo + margin_hi
     dx = float(max(extent)) / cells
     origin = lo - margin_lo - BOUNDARY_NODES * dx

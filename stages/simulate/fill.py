@@ -35,7 +35,8 @@ from __future__ import annotations
 
 import numpy as np
 import cv2
-from scipy.ndimage import binary_dilation, binary_erosion, binary_fill_holes, distance_transform_edt
+from scipy.ndimage import (binary_dilation, binary_erosion, binary_fill_holes, distance_transform_edt,
+                           gaussian_filter)
 from scipy.spatial import cKDTree
 
 # Inside when at least this many of the six axis rays see odd parity.
@@ -43,6 +44,12 @@ INSIDE_VOTES = 4
 # The shell is closed with a ball of this quantile of the means' nearest-neighbour distances
 # (nearly the widest gap, not an outlier's).
 GAP_QUANTILE = 0.99
+# The surface's offset in an outer cell is the median over this many nearest means.
+NORMAL_NEIGHBOURS = 8
+# Cells this close to the solid's boundary (in cells) are cut by the surface; deeper ones are whole.
+SURFACE_DEPTH = 2.0
+# A cell less than this much inside the surface gets no particle (a particle must carry mass).
+MIN_FRACTION = 0.05
 
 
 def cell_index(points: np.ndarray, origin: np.ndarray, dx: float, shape: tuple[int, int, int]) -> np.ndarray:
@@ -94,46 +101,90 @@ def lattice_spacing(dx: float, particles_per_cell: int) -> float:
     return dx / max(1, int(round(particles_per_cell ** (1.0 / 3.0))))
 
 
-def silhouette_gap(points: np.ndarray, spacing: float, mask: np.ndarray, K: np.ndarray) -> float:
-    """How far (m) the solid must grow for its silhouette to have the photographed mask's area.
+def silhouette_gap(means: np.ndarray, mask: np.ndarray, K: np.ndarray) -> float:
+    """How far (m) the means' surface must grow for its silhouette to have the photographed mask's area.
 
     Args:
-        points: (N,3) the solid's particles, camera frame (x right, y down, z forward), m.
-        spacing: their lattice spacing, m.
+        means: (G,3) the object's Gaussian centres, camera frame (x right, y down, z forward), m.
         mask: (H,W) bool, the object in the photograph.
         K: (3,3) intrinsics of the photograph.
 
-    The particles are drawn into a copy of the photograph scaled so that one pixel is one lattice
-    spacing at their median depth (a solid then covers its silhouette without gaps); the missing
-    area over the mask's perimeter is the gap in pixels (plus half a pixel: a particle marks the
-    whole pixel around it, its surface's half out of it), in lattice spacings.
+    The means are drawn into the photograph at twice its resolution, their gaps closed by a disc of
+    half the widest (a morphological closing, as the fill closes its shell); the missing area over
+    the two outlines' mean perimeter is the gap in pixels (plus half a drawn pixel: each mean marks
+    the whole pixel around it), taken to metres at the means' median depth. Measured on the means, not on
+    the lattice, it does not depend on the cell size.
     """
-    z = float(np.median(points[:, 2]))
-    scale = spacing * K[0, 0] / z  # photograph pixels per lattice spacing
-    size = (max(1, int(round(mask.shape[1] / scale))), max(1, int(round(mask.shape[0] / scale))))
-    small = cv2.resize(mask.astype(np.float32), size, interpolation=cv2.INTER_AREA)
-    uv = (points[:, :2] / points[:, 2:3]) * K[[0, 1], [0, 1]] + K[:2, 2]
-    ij = np.floor(uv / scale).astype(int)
-    ij = ij[(ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < size[0]) & (ij[:, 1] < size[1])]
-    drawn = np.zeros(small.shape, bool)
-    drawn[ij[:, 1], ij[:, 0]] = True
+    up = 2  # drawn pixels per photograph pixel
     contours, _ = cv2.findContours((mask > 0).astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
-    perimeter = sum(cv2.arcLength(c, True) for c in contours) / scale
-    if perimeter <= 0:
+    perimeter = up * sum(cv2.arcLength(c, True) for c in contours)
+    if perimeter <= 0 or len(means) < 2:
         return 0.0
-    gap = (float(small.sum()) - float(binary_fill_holes(drawn).sum())) / perimeter + 0.5
-    return max(0.0, gap) * spacing
+    uv = up * ((means[:, :2] / means[:, 2:3]) * K[[0, 1], [0, 1]] + K[:2, 2])
+    gap_px = float(np.quantile(cKDTree(uv).query(uv, k=2)[0][:, 1], GAP_QUANTILE))
+    radius = int(np.ceil(0.5 * gap_px)) + 1
+    H, W = mask.shape
+    ij = np.floor(uv).astype(int) + radius  # drawn on a canvas padded by the closing's radius
+    canvas = np.zeros((up * H + 2 * radius, up * W + 2 * radius), bool)
+    inside = (ij[:, 0] >= 0) & (ij[:, 1] >= 0) & (ij[:, 0] < canvas.shape[1]) & (ij[:, 1] < canvas.shape[0])
+    canvas[ij[inside, 1], ij[inside, 0]] = True
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+    closed = cv2.morphologyEx(canvas.astype(np.uint8), cv2.MORPH_CLOSE, disc).astype(bool)
+    drawn = binary_fill_holes(closed)
+    outline, _ = cv2.findContours(drawn.astype(np.uint8), cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_NONE)
+    # over the mean of the two perimeters: exact for a ring between concentric circles
+    between = 0.5 * (perimeter + sum(cv2.arcLength(c, True) for c in outline))
+    gap = (up * up * float(np.count_nonzero(mask)) - float(drawn.sum())) / between + 0.5
+    return max(0.0, gap) / up * float(np.median(means[:, 2])) / float(K[0, 0])
 
 
-def fill_object(means: np.ndarray, dx: float, particles_per_cell: int,
-                skin: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def inside_fraction(candidates: np.ndarray, means: np.ndarray, origin: np.ndarray, cell: float,
+                    skin: float, view: np.ndarray) -> np.ndarray:
+    """Fraction (shape of candidates) of each candidate cell inside the surface; 0 elsewhere.
+
+    The surface is the means' grown by `skin` across the unit `view` direction (so by skin times the
+    normal's component across it). Cells more than SURFACE_DEPTH cells inside the
+    candidates' boundary are whole; nearer it, a cell holds 1/2 + (s + skin) / cell of itself, s the
+    means' offset from its centre along the outward normal (the occupancy's smoothed gradient; the
+    median over the nearest means): a surface a fifth of a cell in from a cell's outer face leaves
+    0.2 of it inside, whatever the lattice's phase against the surface.
+    """
+    fraction = candidates.astype(float)
+    near = np.argwhere(candidates & (distance_transform_edt(candidates) <= SURFACE_DEPTH))
+    if len(near) == 0:
+        return fraction
+    inward = np.stack(np.gradient(gaussian_filter(fraction, 1.0)), axis=-1)[tuple(near.T)]
+    outward = -inward / np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-12)
+    centres = origin + cell * (near + 0.5)
+    _, nearest = cKDTree(means).query(centres, k=min(NORMAL_NEIGHBOURS, len(means)))
+    nearest = nearest.reshape(len(near), -1)
+    offset = np.median(np.einsum("nkj,nj->nk", means[nearest] - centres[:, None, :], outward), axis=1)
+    across = np.sqrt(np.clip(1.0 - (outward @ view) ** 2, 0.0, 1.0))
+    fraction[tuple(near.T)] = np.clip(0.5 + (offset + skin * across) / cell, 0.0, 1.0)
+    return fraction
+
+
+def across_view_disc(radius: float, view: np.ndarray) -> np.ndarray:
+    """Boolean structuring element: the cells within `radius` cells of the centre, across the unit
+    `view` direction and within half a cell along it (a disc seen face on by the camera)."""
+    n = int(np.ceil(radius))
+    r = np.stack(np.meshgrid(*[np.arange(-n, n + 1)] * 3, indexing="ij"), axis=-1).astype(float)
+    along = r @ view
+    return (np.sum(r * r, axis=-1) - along ** 2 <= radius ** 2) & (np.abs(along) <= 0.5)
+
+
+def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: float = 0.0,
+                view: np.ndarray = np.array([0.0, 0.0, 1.0])) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Fill one object's volume.
 
     Args:
         means: (G,3) Gaussian centres of the object, m.
         dx: cell size, m (the simulation grid's).
         particles_per_cell: lattice density; n = round(cbrt) per axis, at least 1.
-        skin: grow the solid by this much beyond the means' surface, m.
+        skin: grow the solid by this much beyond the means' surface across `view`, m.
+        view: unit direction (3,) of the camera's rays through the object, in the means' frame. A
+            reconstruction's means sit inside the silhouette (its Gaussians reach past them), but its
+            front and back lie where the depth prior put them: the solid grows across the view only.
 
     Returns:
         fill: (N,3) new particle positions, m.
@@ -142,26 +193,35 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int,
     """
     cell = lattice_spacing(dx, particles_per_cell)  # one lattice particle per occupancy cell and axis
     radius = closing_radius(means, cell)
-    pad = radius + int(np.ceil(skin / cell)) + 1  # the closed shell and skin stay off the border
-    origin = means.min(axis=0) - pad * cell
-    shape = tuple(int(n) for n in np.ceil((means.max(axis=0) - origin) / cell).astype(int) + pad + 1)
+    pad = radius + int(np.ceil(skin / cell)) + 2  # the closed shell, skin and surface layer stay off the border
+    # cell faces through the centre of the object's box: a mirror-symmetric body gets a mirror-symmetric
+    # solid (its mass centred, no torque from the lattice), a copy of it elsewhere the same solid, and a
+    # cut through its middle no particle on the cut
+    centre = 0.5 * (means.min(axis=0) + means.max(axis=0))
+    half_cells = np.ceil(0.5 * (means.max(axis=0) - means.min(axis=0)) / cell).astype(int) + pad + 1
+    origin = centre - half_cells * cell
+    shape = tuple(int(n) for n in 2 * half_cells)
     shell = shell_cells(means, origin, cell, shape)
     closed = binary_dilation(shell, ball(radius))
     # ray parity's odd misses inside are filled before the erosion, which would widen each by the ball
     solid = binary_fill_holes(closed | inside_by_ray_parity(closed))
-    occupied = binary_erosion(solid, ball(radius)) | shell
+    solid = binary_erosion(solid, ball(radius)) | shell
     if skin > 0:
-        occupied |= distance_transform_edt(~occupied) * cell <= skin
+        solid = binary_dilation(solid, across_view_disc(skin / cell, view))
+    # the surface cuts the cells about the solid's boundary, one layer beyond it included: each holds
+    # the part of it inside; a cell with a Gaussian is kept, however little of it is inside
+    fraction = inside_fraction(binary_dilation(solid), means, origin, cell, skin, view)
+    gauss_cell = cell_index(means, origin, cell, shape)
+    fraction[tuple(gauss_cell.T)] = np.maximum(fraction[tuple(gauss_cell.T)], MIN_FRACTION)
+    occupied = fraction >= MIN_FRACTION
 
     cells = np.argwhere(occupied)  # C-order: particles of neighbouring cells stay close in memory
     fill = origin + cell * (cells + 0.5)  # one particle at each cell's centre
 
     # share each cell's volume among all particles in it
-    gauss_cell = cell_index(means, origin, cell, shape)
     count = occupied.astype(np.int64)
     np.add.at(count, tuple(gauss_cell.T), 1)
-    cell_volume = cell ** 3 * np.where(occupied & ~binary_erosion(occupied), 0.5, 1.0)
-    per_particle = cell_volume / np.maximum(count, 1)
+    per_particle = cell ** 3 * fraction / np.maximum(count, 1)
     gaussian_volume = per_particle[tuple(gauss_cell.T)]
     fill_volume = per_particle[tuple(cells.T)]
     return fill, gaussian_volume, fill_volume

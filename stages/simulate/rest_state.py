@@ -9,8 +9,8 @@ break that if taken as they are:
   puts the ground plane at the lowest height at which each object resting on
   it stands: the convex hull of its points at or below the plane (seen from
   above) holds its centre of mass with a margin and, for a material that
-  yields, is wide enough to carry its weight below the yield stress, within
-  MAX_SINK of its height. The few points below the
+  yields, the area those points cover is wide enough to carry its weight
+  below the yield stress, within MAX_SINK of its height. The few points below the
   plane stay where they are, inside the ground (they are its contact patch);
   nothing is moved, so frame 0 is still the photograph.
 - Its shape is the loaded shape, but a simulation that starts from it with no
@@ -43,8 +43,10 @@ RELAXED = 1.0e-4
 SETTLE_PERIODS = 10.0
 
 
-def _support(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> tuple[bool, float]:
-    """(whether the convex hull of points (N,2) holds centre (2,) at least `margin` inside its edges, its area m^2)."""
+def _support(points_xz: np.ndarray, centre_xz: np.ndarray, spacing: float) -> tuple[bool, float]:
+    """Whether the convex hull of points (N,2) holds centre (2,) at least one lattice `spacing` inside its
+    edges, and the area (m^2) the points themselves cover: spacing^2 for each lattice column they occupy
+    (a ring of contact bears the weight on the ring, not on the hull it encloses)."""
     if len(points_xz) < 3:
         return False, 0.0
     try:
@@ -52,11 +54,12 @@ def _support(points_xz: np.ndarray, centre_xz: np.ndarray, margin: float) -> tup
     except QhullError:  # all on one line: no area to stand on
         return False, 0.0
     # equations: n . p + offset <= 0 inside, unit n
-    inside = np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -margin
-    return bool(inside), float(hull.volume)  # a 2D hull's volume is its area
+    inside = np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -spacing
+    columns = len(np.unique(np.floor(points_xz / spacing).astype(np.int64), axis=0))
+    return bool(inside), columns * spacing ** 2
 
 
-def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float, bearing_area: float = 0.0) -> float:
+def standing_height(positions: np.ndarray, masses: np.ndarray, spacing: float, bearing_area: float = 0.0) -> float:
     """Lowest plane height (m, +y up) at which one object (positions (N,3), masses (N,)) stands.
 
     It stands when its support (the points at or below the plane, seen from above) holds its centre
@@ -72,7 +75,7 @@ def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float, be
     cap = int(np.searchsorted(heights, heights[0] + MAX_SINK * (heights[-1] - heights[0]), side="right")) - 1
 
     def stands(i: int) -> bool:
-        holds, area = _support(xz[: i + 1], centre, margin)
+        holds, area = _support(xz[: i + 1], centre, spacing)
         return holds and (area >= bearing_area or i == cap)
 
     if not stands(cap):
@@ -87,7 +90,7 @@ def standing_height(positions: np.ndarray, masses: np.ndarray, margin: float, be
     return float(heights[lo])
 
 
-def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray, margin: float,
+def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray, spacing: float,
                    bearing_areas: dict | None = None) -> float:
     """Height of the ground plane (simulation frame, m): the lowest at which every object it touches stands.
 
@@ -95,7 +98,8 @@ def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndar
         positions: (P,3) rest positions, simulation frame (+y up), m.
         masses: (P,) kg.
         object_id: (P,) object of each particle.
-        margin: how far inside its support an object's centre of mass must lie, m.
+        spacing: the fill's lattice spacing, m: a centre of mass must lie this far inside its support,
+            and each lattice column of the support bears spacing^2 of the weight.
         bearing_areas: object -> the support (m^2) it needs not to yield under its weight
             (M g / yield stress); none for elastic and rigid objects.
 
@@ -112,8 +116,22 @@ def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndar
         if not reach:
             return plane
         touching |= reach
-        plane = max([plane] + [standing_height(positions[object_id == k], masses[object_id == k], margin,
+        plane = max([plane] + [standing_height(positions[object_id == k], masses[object_id == k], spacing,
                                                bearing_areas.get(int(k), 0.0)) for k in reach])
+
+
+def turn_deg(rest: np.ndarray, now: np.ndarray, weights: np.ndarray) -> float:
+    """Angle in degrees of the best rotation (weighted Kabsch) taking the points rest (N,3) onto now (N,3)."""
+    a = rest - weights @ rest / weights.sum()
+    b = now - weights @ now / weights.sum()
+    U, _, Vt = np.linalg.svd((b * weights[:, None]).T @ a)
+    R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+    return math.degrees(math.acos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def column_sag(material, height: float) -> float:
+    """Static sag in m of the top of an elastic column of `height` m under its own weight: rho g h^2 / (2 E)."""
+    return material.density * 9.81 * height ** 2 / (2.0 * material.youngs_modulus)
 
 
 def fundamental_period(material, height: float) -> float:

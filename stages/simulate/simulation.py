@@ -36,8 +36,6 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
-# The solid's silhouette is measured and grown at most this many times (each growth is whole lattice cells).
-SKIN_ITERATIONS = 3
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
 
@@ -79,10 +77,12 @@ class Simulation:
                               dtype=np.float64).reshape(-1, 3)  # world frame
         self.speed_hint = float(np.max(np.linalg.norm(velocities, axis=1), initial=0.0))
         ground = physics.ground
-        fit = dict(gravity=g, duration_s=physics.duration_s, velocities=velocities @ self.Q.T, walls=physics.walls)
 
-        # the cell size comes from the Gaussians; the final grid also covers the fill
-        dx = domain.fit_grid(means @ self.Q.T, physics.grid, ground_y=None, **fit).dx
+        # the cell size comes from the Gaussians (the ground, if any, through the lowest of them, as
+        # the final grid has it); the final grid also covers the fill
+        means_sim = means @ self.Q.T
+        dx = domain.fit_grid(means_sim, physics.grid, ground_y=means_sim[:, 1].min() if ground.enabled else None,
+                             walls=physics.walls).dx
         spacing = lattice_spacing(dx, physics.particles_per_cell)
         fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette)
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
@@ -101,7 +101,7 @@ class Simulation:
                    for k, m in enumerate(self.materials) if getattr(m, "yield_stress", None)}
         self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, spacing, bearing)
                          if ground.enabled else None)
-        self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, **fit)
+        self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, walls=physics.walls)
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
                        if ground.enabled else Ground(GROUND_NONE))
         # potential energy is measured from the ground, else from the grid's starting floor
@@ -132,23 +132,17 @@ class Simulation:
         volumes (G,) m^3; grown to the photograph's silhouette when it is given."""
         means_sim = means @ self.Q.T
         per_cell = self.physics.particles_per_cell
-        spacing = lattice_spacing(dx, per_cell)
         fills, gauss_volume = [], np.zeros(len(means))
         for k in range(len(self.materials)):
             sel = object_id == k
             # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
             # lattice along the camera's axes meets a pitched ground with a staircase that lands on
             # one side first and spins the body (tests/simulate: a sphere on slip ground).
-            fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, per_cell)
+            skin = 0.0 if silhouette is None else silhouette_gap(means[sel], silhouette[0] == k + 1, silhouette[1])
+            view = self.Q @ means[sel].mean(axis=0)  # the camera sits at the world's origin
+            fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, per_cell, skin,
+                                                               view / np.linalg.norm(view))
             if silhouette is not None:
-                mask, K = silhouette
-                skin = 0.0
-                for _ in range(SKIN_ITERATIONS):  # the growth is in whole lattice cells: measure again
-                    gap = silhouette_gap(np.concatenate([means[sel], fill @ self.Q]), spacing, mask == k + 1, K)
-                    if gap < 0.5 * spacing:
-                        break
-                    skin += gap
-                    fill, gauss_volume[sel], fill_volume = fill_object(means_sim[sel], dx, per_cell, skin)
                 log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
             fills.append((fill @ self.Q, fill_volume, k))
         return fills, gauss_volume
@@ -250,7 +244,11 @@ class Simulation:
             steps += 1
             if relaxation.step(s):
                 break
-        sag = float(np.max(rest_sim[:, 1] - s.x.numpy()[:, 1]))
+        settled = s.x.numpy().astype(np.float64)
+        sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
+        if relaxation.residual >= rest_state.RELAXED:
+            for k, h in zip(deformable, heights):
+                self._warn_unsettled(k, h, rest_sim[self.object_id == k], settled[self.object_id == k], steps * dt)
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
         self._rest_F_inverse = np.linalg.inv(s.F.numpy()[: self.n_gaussians].astype(np.float64))
         elapsed = time.perf_counter() - started
@@ -259,6 +257,19 @@ class Simulation:
                  steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, elapsed)
         log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
                  self._substeps_at_rest * elapsed / steps, self._substeps_at_rest, 1e3 * elapsed / steps)
+
+    def _warn_unsettled(self, k: int, height: float, rest: np.ndarray, settled: np.ndarray, seconds: float) -> None:
+        """Say that object k did not come to rest under its weight, how far it moved, and what holds it."""
+        material = self.materials[k]
+        turn = rest_state.turn_deg(rest, settled, self.masses[self.object_id == k])
+        sag = float(np.max(rest[:, 1] - settled[:, 1]))
+        log.warning("object %d (%s, E = %.3g Pa) did not come to rest under its own weight in %.2f s: it sagged "
+                    "%.1f mm and turned %.1f degrees, where an elastic column of its %.0f mm height sags %.2f mm. "
+                    "As photographed it may not stand: in the run it will go on sagging, buckle or tip over. A "
+                    "stiffer material (objects[%d].material.youngs_modulus%s), a smaller size_m or preset rigid "
+                    "holds it up", k, material.preset, material.youngs_modulus, seconds, 1e3 * sag, turn,
+                    1e3 * height, 1e3 * rest_state.column_sag(material, height), k,
+                    " or yield_stress" if getattr(material, "yield_stress", None) else "")
 
     def run(self) -> TrajectoriesArtifact:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
