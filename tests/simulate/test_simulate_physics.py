@@ -175,7 +175,10 @@ def test_two_objects_collide_without_interpenetration(device):
     assert gap.min() > -sim.grid.dx
     va = np.diff(centre_of_mass(tr, a)[:, 0]) * tr.fps
     assert va[0] > 0.5 and va[-1] < 0  # object 0 moved right, then bounced back
-    np.testing.assert_allclose(tr.momentum, 0.0, atol=1e-3 * tr.masses[a].sum())
+    # the collision conserves momentum: it stays what the impulses gave (the cubes' masses differ by what
+    # their surface points' rounding on the lattice gives, a few tenths of a percent)
+    np.testing.assert_allclose(tr.momentum[1:], np.broadcast_to(tr.momentum[1], tr.momentum[1:].shape),
+                               atol=1e-3 * tr.masses[a].sum())
 
 
 @pytest.mark.parametrize("ground", ["slip", "friction"])
