@@ -198,10 +198,24 @@ class Simulation:
             moments = np.linalg.eigvalsh(inertia)
             log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
                      material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
+            self._warn_crushed_by_weight(k, float(np.ptp(x[:, 1])))
         if self.ground_y is not None:
             sunk = float(self.ground_y - rest_sim[:, 1].min())
             log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
                      1e3 * sunk)
+
+    def _warn_crushed_by_weight(self, k: int, height: float) -> None:
+        """Say so when object k's own weight presses its base beyond its yield stress (rho g H, a column's)."""
+        material = self.materials[k]
+        yield_stress = getattr(material, "yield_stress", None)
+        g = float(np.linalg.norm(self.gravity_world))
+        pressure = material.density * g * height
+        if yield_stress and pressure > yield_stress:
+            log.warning("object %d (%s) is %.0f mm tall: its weight presses its base with about rho g H = %.3g Pa, "
+                        "above its yield_stress %.3g Pa, so it will slump under its own weight as a column of "
+                        "this material would. To keep its shape raise objects[%d].material.yield_stress above "
+                        "%.3g Pa, or make size_m smaller", k, material.preset, 1e3 * height, pressure,
+                        yield_stress, k, pressure)
 
     def substep_size(self, max_speed: float) -> float:
         """physics.dt, or the CFL substep for particles up to max_speed (m/s)."""

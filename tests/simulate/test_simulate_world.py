@@ -191,3 +191,19 @@ def test_a_run_beyond_its_substep_budget_is_refused_before_it_starts():
         Simulation(PhysicsConfig(), [M.Jelly(youngs_modulus=1e12)], points, np.zeros(len(points), int))
     with pytest.raises(InputError, match=r"physics\.duration_s.*GiB"):
         Simulation(PhysicsConfig(duration_s=600, fps=240), [M.Jelly()], points, np.zeros(len(points), int))
+
+
+def test_a_body_its_weight_crushes_is_named_before_the_run(caplog):
+    """A plasticine column whose weight presses its base beyond its yield stress (rho g H = 9.8 kPa at 1 m,
+    against 5 kPa) is named, with the stress it would need, before any work; a 10 cm one is not."""
+    for height, warned in ((1.0, True), (0.1, False)):
+        caplog.clear()
+        points = box_surface(np.zeros(3), np.array([0.3 * height, height, 0.3 * height]), 0.05 * height)
+        with caplog.at_level("WARNING", logger="physmotion.simulate"):
+            Simulation(PhysicsConfig(duration_s=0.1, grid=16), [M.Plasticine()], points + [0, 0, 2.0],
+                       np.zeros(len(points), int))
+        messages = [r.getMessage() for r in caplog.records if "yield_stress" in r.getMessage()]
+        assert bool(messages) == warned
+        if warned:
+            needed = float(messages[0].split("yield_stress above ")[1].split(" Pa")[0])
+            assert needed == pytest.approx(1000 * G * height, rel=0.05)
