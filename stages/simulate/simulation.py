@@ -96,9 +96,9 @@ class Simulation:
         rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         # the ground: the plane, normal to gravity, on which the objects stand as photographed
-        # a body that yields stands on a foot wide enough to carry its weight below its yield stress
-        bearing = {k: g * float(self.masses[self.object_id == k].sum()) / m.yield_stress
-                   for k, m in enumerate(self.materials) if getattr(m, "yield_stress", None)}
+        # a deformable body stands on a foot wide enough to carry its weight (rest_state.bearing_stress)
+        bearing = {k: g * float(self.masses[self.object_id == k].sum()) / rest_state.bearing_stress(m)
+                   for k, m in enumerate(self.materials) if m.preset != "rigid"}
         self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, spacing, bearing)
                          if ground.enabled else None)
         self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, walls=physics.walls)

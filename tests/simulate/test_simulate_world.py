@@ -207,3 +207,23 @@ def test_a_body_its_weight_crushes_is_named_before_the_run(caplog):
         if warned:
             needed = float(messages[0].split("yield_stress above ")[1].split(" Pa")[0])
             assert needed == pytest.approx(1000 * G * height, rel=0.05)
+
+
+def test_a_soft_ball_stands_on_a_foot_that_carries_its_weight():
+    """rest_state.support_height on a solid jelly ball (simulation frame, +y up): the plane at sink s cuts a
+    disc of area 2 pi R s, so a foot carrying M g at the bearing stress (5 % of E) needs
+    s = M g / (bearing_stress 2 pi R): the plane is the first lattice layer at or above that; stiffer, it
+    needs less."""
+    spacing, R = 0.004, 0.1
+    axis = np.arange(-R, R + spacing / 2, spacing)
+    grid = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
+    ball = grid[np.linalg.norm(grid, axis=1) <= R]
+    masses = np.full(len(ball), 1000.0 * spacing ** 3)
+    sinks = []
+    for E in (2e5, 1e6):
+        area = G * masses.sum() / rest_state.bearing_stress(M.Jelly(youngs_modulus=E))
+        height = rest_state.support_height(ball, masses, np.zeros(len(ball), int), spacing, {0: area})
+        sink = height - ball[:, 1].min()
+        assert area / (2 * math.pi * R) <= sink < area / (2 * math.pi * R) + spacing  # the next lattice layer
+        sinks.append(sink)
+    assert sinks[1] < sinks[0]
