@@ -6,7 +6,7 @@ Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
 scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
 otherwise. The object is simulated under the scene's camera, ground and
 duration with every condition removed, once per preset (with the preset's
-defaults). Printed per run: the largest turn of the body
+defaults; `scene`: the scene's own materials). Printed per run: the largest turn of the body
 over the run (degrees, best rigid fit of all particles), the largest
 horizontal travel of its centre of mass (mm and % of size_m), the largest
 sag of the centre of mass (mm), substeps and seconds.
@@ -59,13 +59,16 @@ def main() -> None:
             physics = physics.model_copy(update={"duration_s": args.duration})
         size = scene.objects[0].size_m
         for preset in args.presets:
-            materials = [PRESET_MODELS[preset]() for _ in scene.objects]
+            materials = ([o.material for o in scene.objects] if preset == "scene"
+                         else [PRESET_MODELS[preset]() for _ in scene.objects])
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
                              silhouette=(g.mask, g.K), scene_file=scene.file)
             tr = sim.run()
             r = drift(sim, tr)
-            print(f"| {folder.name} | {preset} | {r['turn']:.2f} | {1e3 * r['travel']:.2f} | "
+            label = preset if preset != "scene" else "scene's: " + ", ".join(
+                f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
+            print(f"| {folder.name} | {label} | {r['turn']:.2f} | {1e3 * r['travel']:.2f} | "
                   f"{100 * r['travel'] / size:.2f} | {1e3 * r['sag']:.2f} | {r['substeps']} | "
                   f"{time.perf_counter() - start:.0f} |", flush=True)
 

@@ -141,9 +141,10 @@ def turn_deg(rest: np.ndarray, now: np.ndarray, weights: np.ndarray) -> float:
     return math.degrees(math.acos(np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)))
 
 
-def column_sag(material, height: float) -> float:
-    """Static sag in m of the top of an elastic column of `height` m under its own weight: rho g h^2 / (2 E)."""
-    return material.density * 9.81 * height ** 2 / (2.0 * material.youngs_modulus)
+def column_sag(material, height: float, gravity: float) -> float:
+    """Static sag in m of the top of an elastic column of `height` m under its own weight (gravity in
+    m/s^2): rho g h^2 / (2 E)."""
+    return material.density * gravity * height ** 2 / (2.0 * material.youngs_modulus)
 
 
 def fundamental_period(material, height: float) -> float:
