@@ -61,6 +61,8 @@ HIDDEN_TRANSMITTANCE = 1.0 / 255
 rest: its colour then moves no pixel by more than about a grey level."""
 HIDING_ROUNDS = 4
 """Rounds of dropping the fill particles that show at rest (each can uncover a few behind)."""
+LAYERS_PER_RENDER = 32
+"""Depth layers of transmittance per render (channels; transmittance_layers)."""
 REACH_SIGMAS = math.sqrt(2 * math.log(255))
 """How far a Gaussian of opacity 1 reaches in standard deviations: to alpha 1/255 (splat's cut-off)."""
 DILATION_PX2 = 0.3
@@ -150,69 +152,112 @@ class Mixing:
         return self.so_far
 
 
-def blending_weights(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
-                     camera: splat.Camera) -> torch.Tensor:
-    """(N,) each Gaussian's blending weight T_k alpha_k summed over the pixels of its render from
-    ``camera`` (px): the gradient of the rendered sum of a constant feature 1 with respect to it."""
-    ones = torch.ones_like(means[:, :1], requires_grad=True)
-    splat.rasterize(means.detach(), opacities.detach(), ones, camera, covariances=covariances.detach()).features.sum() \
-        .backward()
-    return ones.grad[:, 0]
+def transmittance_layers(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
+                         depths: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
+    """(L, H, W) the transmittance of these Gaussians in front of each camera depth ``depths`` (L,), m.
+
+    splat composites each pixel front to back in order of the Gaussians' camera depth, so the
+    blending weights of the Gaussians nearer than a depth z sum to 1 - T(z): one render whose
+    channel l is 1 for the Gaussians nearer than depths[l] gives all L at once (LAYERS_PER_RENDER
+    channels a render). Forward renders only: the same bytes on every run and thread count.
+    """
+    z = to_camera(means, camera.world_to_camera)[:, 2]
+    layers = []
+    for group in depths.split(LAYERS_PER_RENDER):
+        nearer = (z[:, None] < group[None, :].to(z.dtype)).to(opacities.dtype)
+        nearer = torch.nn.functional.pad(nearer, (0, LAYERS_PER_RENDER - len(group)))  # one kernel for all
+        covered = splat.rasterize(means, opacities, nearer, camera, covariances=covariances).features
+        layers.append((1 - covered[..., :len(group)]).clamp(0, 1).permute(2, 0, 1))
+    return torch.cat(layers)
 
 
-def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, surface_means: torch.Tensor,
-                   surface_covariances: torch.Tensor, surface_opacities: torch.Tensor,
-                   camera: splat.Camera) -> torch.Tensor:
+def exposure(positions: torch.Tensor, sigma: torch.Tensor, means: torch.Tensor, covariances: torch.Tensor,
+             opacities: torch.Tensor, layer_depth: float, camera: splat.Camera) -> torch.Tensor:
+    """(N,) for each particle at positions (N, 3) (world, m), rendered round of standard deviation
+    sigma (N,), m, with opacity INTERIOR_OPACITY: the mean over its footprint, weighted by its own
+    alpha, of the transmittance in front of it of the other Gaussians (means, covariances,
+    opacities; those at positions among them). That is what it adds to the render over what it
+    would add alone. It is read at the nearest depth layer (of ``layer_depth`` m) in front of the
+    particle, so what lies within a layer in front of it is not counted: an upper bound."""
+    device, N = positions.device, len(positions)
+    in_camera = to_camera(positions, camera.world_to_camera)
+    z = in_camera[:, 2]
+    nearest = float(z.min())
+    layer = ((z - nearest) / layer_depth).floor().long()
+    depths = nearest + layer_depth * torch.arange(int(layer.max()) + 1, device=device, dtype=z.dtype)
+    transmittance = transmittance_layers(means, covariances, opacities, depths, camera)
+    K = torch.as_tensor(camera.K, dtype=positions.dtype, device=device)
+    uv = project(in_camera, K)
+    sigma_px2 = (sigma * K[0, 0] / z.clamp_min(1e-9)) ** 2 + DILATION_PX2
+    half = int(math.ceil(float(REACH_SIGMAS * sigma_px2.max().sqrt()))) + 1
+    steps = torch.arange(-half, half + 1, device=device)
+    offsets = torch.stack(torch.meshgrid(steps, steps, indexing="xy"), -1).reshape(-1, 2)
+    size = torch.tensor([camera.width, camera.height], device=device)
+    exposed = torch.zeros(N, dtype=transmittance.dtype, device=device)
+    for chunk in torch.arange(N, device=device).split(4096):
+        pixel = uv[chunk].floor().long()[:, None] + offsets[None]  # (n, k, 2) col, row
+        from_centre = pixel.to(uv.dtype) + 0.5 - uv[chunk, None]
+        alpha = (min(INTERIOR_OPACITY, 0.99) * torch.exp(-0.5 * (from_centre ** 2).sum(-1) / sigma_px2[chunk, None]))
+        alpha = torch.where(alpha >= 1 / 255, alpha, 0.0).to(transmittance.dtype)
+        col, row = pixel[..., 0].clamp(0, camera.width - 1), pixel[..., 1].clamp(0, camera.height - 1)
+        # off the image nothing hides it
+        seen = torch.where(((pixel >= 0) & (pixel < size)).all(-1), transmittance[layer[chunk, None], row, col], 1.0)
+        exposed[chunk] = (alpha * seen).sum(1) / alpha.sum(1).clamp_min(1e-12)
+    return exposed
+
+
+def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, spacing: torch.Tensor,
+                   surface_means: torch.Tensor, surface_covariances: torch.Tensor, surface_opacities: torch.Tensor,
+                   camera: splat.Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """(N,) each fill particle's standard deviation (m) narrowed so that it stays hidden behind the
     surface at rest, and (N,) bool whether it does (those that do not are transparent at rest).
 
     First each particle is narrowed so that its footprint, out to REACH_SIGMAS of its projected
     standard deviation (with splat's dilation), stays on pixels where the surface's rest alpha is at
-    least OPAQUE_ALPHA (0 where its centre is off them or in front of the surface's rendered
-    distance). Then, rendered together with the surface at rest, any particle that still shows
-    (its summed blending weight, over what it would add alone, above HIDDEN_TRANSMITTANCE: where the
-    surface is translucent, or its Gaussians lie behind the particle) is taken out, and again for what that uncovers, up to
-    HIDING_ROUNDS times.
+    least OPAQUE_ALPHA (0 where its centre is off them). Then, rendered together with the surface at
+    rest, any particle that still shows (its exposure, the transmittance in front of it over its
+    footprint, above HIDDEN_TRANSMITTANCE: where the surface is translucent, or its Gaussians lie
+    behind the particle) is taken out, and again for what that uncovers, up to HIDING_ROUNDS times.
+    Forward renders only (:func:`exposure`): the same bytes on every run and thread count.
 
     Args:
-        rest_positions: (N, 3) world, m; sigma: (N,) their standard deviation from the lattice, m.
+        rest_positions: (N, 3) world, m; sigma: (N,) their standard deviation from the lattice, m;
+            spacing: (N,) their lattice's spacing, m (the exposure's depth layers: half the finest).
         surface_means, surface_covariances, surface_opacities: the G surface Gaussians at rest.
     """
+    device = rest_positions.device
     with torch.no_grad():
         surface = splat.rasterize(surface_means, surface_opacities, torch.zeros_like(surface_means[:, :1]), camera,
                                   covariances=surface_covariances)
-    K = torch.as_tensor(camera.K, dtype=rest_positions.dtype, device=rest_positions.device)
-    in_camera = to_camera(rest_positions, camera.world_to_camera)
-    uv = project(in_camera, K)
-    opaque = (surface.alpha >= OPAQUE_ALPHA).cpu().numpy().astype(np.uint8)
-    # px from each opaque pixel's centre to the nearest pixel that is not (0 on those)
-    room = torch.as_tensor(cv2.distanceTransform(opaque, cv2.DIST_L2, cv2.DIST_MASK_PRECISE),
-                           device=rest_positions.device)
-    col = uv[:, 0].floor().long()
-    row = uv[:, 1].floor().long()
-    inside = (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height) & (in_camera[:, 2] > 0)
-    col, row = col.clamp(0, camera.width - 1), row.clamp(0, camera.height - 1)
-    room_px = torch.where(inside, room[row, col] - 0.5, 0.0)  # from the particle's pixel's edge
-    behind = in_camera.norm(dim=1) > surface.depth[row, col] / surface.alpha[row, col].clamp_min(OPAQUE_ALPHA)
-    px_per_m = K[0, 0] / in_camera[:, 2].clamp_min(1e-9)
-    fits_px2 = (room_px.clamp_min(0) / REACH_SIGMAS) ** 2 - DILATION_PX2
-    narrowed = torch.minimum(sigma, fits_px2.clamp_min(0).sqrt() / px_per_m)
-    hidden = inside & behind & (fits_px2 > 0)
-    sigma = torch.where(hidden, narrowed, 0.0)
-    eye = torch.eye(3, dtype=surface_covariances.dtype, device=sigma.device)
-    G = len(surface_means)
-    for _ in range(HIDING_ROUNDS):
-        kept = torch.nonzero(hidden)[:, 0]
-        weights = blending_weights(
-            torch.cat([surface_means, rest_positions[kept].to(surface_means.dtype)]),
-            torch.cat([surface_covariances, sigma[kept].to(eye.dtype)[:, None, None] ** 2 * eye]),
-            torch.cat([surface_opacities, torch.full((len(kept),), INTERIOR_OPACITY, dtype=surface_opacities.dtype,
-                                                     device=sigma.device)]), camera)[G:]
-        # what the particle would add alone: its opacity (clamped as splat does) over its projected
-        # footprint, 2 pi det(Sigma_2D)^(1/2) with the dilation
-        alone = min(INTERIOR_OPACITY, 0.99) * 2 * math.pi * ((sigma[kept] * px_per_m[kept]) ** 2 + DILATION_PX2)
-        showing = kept[weights > HIDDEN_TRANSMITTANCE * alone]
-        if len(showing) == 0:
-            break
-        hidden[showing] = False
-    return sigma, hidden
+        K = torch.as_tensor(camera.K, dtype=rest_positions.dtype, device=device)
+        in_camera = to_camera(rest_positions, camera.world_to_camera)
+        uv = project(in_camera, K)
+        opaque = (surface.alpha >= OPAQUE_ALPHA).cpu().numpy().astype(np.uint8)
+        # px from each opaque pixel's centre to the nearest pixel that is not (0 on those)
+        room = torch.as_tensor(cv2.distanceTransform(opaque, cv2.DIST_L2, cv2.DIST_MASK_PRECISE), device=device)
+        col = uv[:, 0].floor().long()
+        row = uv[:, 1].floor().long()
+        inside = (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height) & (in_camera[:, 2] > 0)
+        col, row = col.clamp(0, camera.width - 1), row.clamp(0, camera.height - 1)
+        room_px = torch.where(inside, room[row, col] - 0.5, 0.0)  # from the particle's pixel's edge
+        behind = in_camera.norm(dim=1) > surface.depth[row, col] / surface.alpha[row, col].clamp_min(OPAQUE_ALPHA)
+        px_per_m = K[0, 0] / in_camera[:, 2].clamp_min(1e-9)
+        fits_px2 = (room_px.clamp_min(0) / REACH_SIGMAS) ** 2 - DILATION_PX2
+        hidden = inside & behind & (fits_px2 > 0)
+        sigma = torch.where(hidden, torch.minimum(sigma, fits_px2.clamp_min(0).sqrt() / px_per_m), 0.0)
+        eye = torch.eye(3, dtype=surface_covariances.dtype, device=device)
+        layer_depth = 0.5 * float(spacing.min()) if len(spacing) else 1.0
+        for _ in range(HIDING_ROUNDS):
+            kept = torch.nonzero(hidden)[:, 0]
+            if len(kept) == 0:
+                break
+            exposed = exposure(
+                rest_positions[kept], sigma[kept], torch.cat([surface_means, rest_positions[kept].to(surface_means.dtype)]),
+                torch.cat([surface_covariances, sigma[kept].to(eye.dtype)[:, None, None] ** 2 * eye]),
+                torch.cat([surface_opacities, torch.full((len(kept),), INTERIOR_OPACITY, dtype=surface_opacities.dtype,
+                                                         device=device)]), layer_depth, camera)
+            showing = kept[exposed > HIDDEN_TRANSMITTANCE]
+            if len(showing) == 0:
+                break
+            hidden[showing] = False
+    return torch.where(hidden, sigma, 0.0), hidden

@@ -98,7 +98,8 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     fill_means = t(trajectories.rest_positions[fill]).to(means.dtype)
     spacing = t(lattice_spacing(trajectories.rest_positions, trajectories.is_gaussian,
                                 trajectories.object_id)).to(means.dtype)
-    sigma, hidden = hidden_at_rest(fill_means, GRAIN_SIGMA * spacing[G:], means, covariances, opacities, camera)
+    sigma, hidden = hidden_at_rest(fill_means, GRAIN_SIGMA * spacing[G:], spacing[G:], means, covariances, opacities,
+                                   camera)
     N = len(sigma)
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
