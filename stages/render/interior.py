@@ -50,6 +50,11 @@ OPAQUE_SURFACE = 0.5
 the reconstruction's soft edges and floaters, whose colours are mixed with the background's)."""
 GRANULAR = ("sand", "snow")
 """The presets whose particles read as grains once they flow (grain_shades)."""
+GRAIN_OPACITY = 50.0
+"""Opacity of a grain of granular material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
+a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
+over a quarter of its radius (the edge antialiased), where a Gaussian of opacity 1 takes over 1.4 radii
+and a heap of them reads as a blur of one colour."""
 GRAIN_SHADE = 0.13
 """Spread (standard deviation) of the grains' brightness relative to their colour: measured on
 scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
@@ -103,6 +108,25 @@ def surface_under(rest_positions: np.ndarray, object_id: np.ndarray, surface_mea
         candidates = opaque if len(opaque) else candidates
         under[members] = candidates[cKDTree(surface_means[candidates]).query(rest_positions[members])[1]]
     return under
+
+
+def grain_shapes(volumes: np.ndarray, material_id: np.ndarray, opacities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P,) standard deviation (m) and (P,) opacity of each particle as a grain of its share of the
+    material, once its material flows (Mixing): a ball whose alpha is 1/2 at GRAIN_SIGMA sqrt(2 ln 2)
+    cube roots of its volume (V^(1/3): the side of its share) from its centre, so that neighbours
+    overlap and a heap is opaque. Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY;
+    of the others, of the particle's own opacity (opacities, (P,)) and standard deviation
+    GRAIN_SIGMA V^(1/3): a torn face reads as solid material, not as grains.
+
+    Args:
+        volumes: (P,) m^3; material_id: (P,) index into schemas.materials.PRESETS.
+    """
+    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
+    opacity = np.where(granular, GRAIN_OPACITY, opacities)
+    # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
+    half_alpha_radius = GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * np.cbrt(volumes)
+    return np.where(granular, half_alpha_radius / np.sqrt(2 * np.log(2 * GRAIN_OPACITY)),
+                    GRAIN_SIGMA * np.cbrt(volumes)), opacity
 
 
 def grain_shades(material_id: np.ndarray) -> np.ndarray:

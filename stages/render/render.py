@@ -29,7 +29,7 @@ import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, hidden_at_rest, lattice_spacing,
+from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, grain_shapes, hidden_at_rest, lattice_spacing,
                        surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
@@ -66,6 +66,7 @@ class Particles(NamedTuple):
     grain_covariances: torch.Tensor
     mixing: Mixing
     opacities: torch.Tensor
+    grain_opacities: torch.Tensor
     opaque_at_rest: torch.Tensor
     colors: torch.Tensor
     rest_seen: torch.Tensor
@@ -80,7 +81,8 @@ class Particles(NamedTuple):
         mixed = self.mixing(positions, F)
         shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
         colors = (self.colors * (1 + mixed * self.grain_shade)[:, None]).clamp(0, 1)
-        return F @ shape @ F.transpose(1, 2), self.opacities * torch.maximum(self.opaque_at_rest, mixed), colors
+        opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
+        return F @ shape @ F.transpose(1, 2), opacities, colors
 
 
 def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, camera: splat.Camera,
@@ -105,14 +107,16 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
     rest_covariances = torch.cat([covariances, sigma[:, None, None] ** 2 * eye])
-    # a grain stands for its particle's share of the material: the cube root of its volume
-    grain = (GRAIN_SIGMA * t(np.cbrt(trajectories.volumes)).to(spacing.dtype))[:, None, None]
+    opacities = torch.cat([opacities, torch.full((N,), INTERIOR_OPACITY, dtype=opacities.dtype, device=device)])
+    grain_sigma, grain_opacities = grain_shapes(trajectories.volumes, trajectories.material_id, opacities.cpu().numpy())
+    grain = t(grain_sigma).to(spacing.dtype)[:, None, None]
     rest_means = torch.cat([means, fill_means])
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
         grain_covariances=torch.where(spacing.isfinite()[:, None, None], grain ** 2 * eye, rest_covariances),
         mixing=Mixing(rest_means, trajectories.object_id, spacing),
-        opacities=torch.cat([opacities, torch.full((N,), INTERIOR_OPACITY, dtype=opacities.dtype, device=device)]),
+        opacities=opacities,
+        grain_opacities=torch.where(spacing.isfinite(), t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
         colors=torch.cat([colors, colors[under]]),
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),

@@ -14,7 +14,7 @@ import splat
 from schemas import materials as M
 from schemas.scene import PhysicsConfig
 from stages.enhance.flow import enhance_frames
-from stages.render.interior import surface_under
+from stages.render.interior import grain_shapes, surface_under, transmittance_layers
 from schemas.artifacts import TrajectoriesArtifact
 from stages.render.render import render_video
 from stages.simulate.fill import fill_object
@@ -185,3 +185,44 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     rendered = coarse.rgb[-1].astype(float) / coarse.alpha[-1][..., None]
     assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 2
 
+
+
+def test_transmittance_layers_are_the_render_of_the_gaussians_in_front():
+    """transmittance_layers against its reference: 1 - alpha of splat's render of only the Gaussians
+    nearer than each depth, for random Gaussians at random depths."""
+    rng = np.random.default_rng(5)
+    n = 400
+    means = torch.as_tensor(np.c_[rng.uniform(-0.2, 0.2, (n, 2)), rng.uniform(0.8, 1.2, n)], dtype=torch.float32)
+    covariances = torch.as_tensor(np.eye(3) * rng.uniform(0.005, 0.02, (n, 1, 1)) ** 2, dtype=torch.float32)
+    opacities = torch.as_tensor(rng.uniform(0.2, 0.9, n), dtype=torch.float32)
+    K = np.array([[FOCAL, 0, SIZE / 2], [0, FOCAL, SIZE / 2], [0, 0, 1]])
+    camera = splat.Camera(K, np.eye(4), SIZE, SIZE)
+    depths = torch.linspace(0.85, 1.15, 40)  # more than one render's channels
+    layers = transmittance_layers(means, covariances, opacities, depths, camera)
+    for l in (0, 17, 39):
+        nearer = means[:, 2] < depths[l]
+        alone = splat.rasterize(means[nearer], opacities[nearer], torch.ones(int(nearer.sum()), 1), camera,
+                                covariances=covariances[nearer])
+        np.testing.assert_allclose(layers[l].numpy(), 1 - alone.alpha.numpy(), atol=1e-5)
+
+
+def test_a_grain_of_sand_is_a_hard_disc_of_its_share_of_the_volume():
+    """A granular grain alone, rendered by splat face-on: alpha 1/2 at GRAIN_SIGMA sqrt(2 ln 2) cube roots
+    of its volume from its centre (as the soft grain of the other materials), and falling from 0.9 to 0.1
+    within a quarter of that radius plus a pixel, where the soft grain takes over 1.4 radii."""
+    volume = 0.03 ** 3
+    sigma, opacity = grain_shapes(np.array([volume, volume]), np.array([M.PRESETS.index("sand"),
+                                                                        M.PRESETS.index("jelly")]), np.ones(2))
+    size, focal = 201, 2000.0
+    K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]])
+    camera = splat.Camera(K, np.eye(4), size, size)
+    radius_px = 0.5 * np.sqrt(2 * np.log(2)) * np.cbrt(volume) * focal
+    widths = []
+    for s, o in zip(sigma, opacity):
+        grain = splat.rasterize(torch.tensor([[0.0, 0.0, 1.0]]), torch.tensor([float(o)]), torch.ones(1, 1), camera,
+                                covariances=torch.eye(3)[None] * float(s) ** 2)
+        profile = grain.alpha[size // 2, size // 2:].numpy()  # from the centre pixel outwards
+        r = np.arange(len(profile))
+        assert abs(np.interp(0.5, profile[::-1], r[::-1]) - radius_px) < 1.0
+        widths.append(np.interp(0.1, profile[::-1], r[::-1]) - np.interp(0.9, profile[::-1], r[::-1]))
+    assert widths[0] <= 0.25 * radius_px + 1 and widths[1] > 1.4 * radius_px
