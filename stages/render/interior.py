@@ -11,14 +11,17 @@ a Gaussian of its own (as PhysGaussian renders its filled particles):
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
 Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
-surface Gaussians included, becomes a round grain of its share of the volume, and
-grains of granular materials each take a brightness of their own (:func:`grain_shades`).
+surface Gaussians included, becomes a round grain of its share of the volume
+(:func:`grain_shapes`: hard, opaque discs for sand and snow, soft for a torn solid),
+and grains of granular materials each take a brightness of their own (:func:`grain_shades`).
 
 At rest the interior must stay hidden behind the surface, so that frame 0 is the
 reconstruction's render. The lattice's outer cells reach up to a cell past the
 Gaussians (stages/simulate/fill.py), and a reconstruction's surface is not
 opaque everywhere, so some particles would show at rest: :func:`hidden_at_rest`
-narrows those near the silhouette and finds the ones that would still show.
+narrows those near the silhouette and finds the ones that would still show, from
+forward renders only (:func:`exposure`), so that the choice is the same bytes on
+every run and thread count.
 Those are transparent at rest and become opaque as their material flows or tears
 (:class:`Mixing`, which also grows the narrowed ones back to full grains): the
 interior appears where the surface opens, and only there.
@@ -276,7 +279,8 @@ def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, spacing: t
             if len(kept) == 0:
                 break
             exposed = exposure(
-                rest_positions[kept], sigma[kept], torch.cat([surface_means, rest_positions[kept].to(surface_means.dtype)]),
+                rest_positions[kept], sigma[kept],
+                torch.cat([surface_means, rest_positions[kept].to(surface_means.dtype)]),
                 torch.cat([surface_covariances, sigma[kept].to(eye.dtype)[:, None, None] ** 2 * eye]),
                 torch.cat([surface_opacities, torch.full((len(kept),), INTERIOR_OPACITY, dtype=surface_opacities.dtype,
                                                          device=device)]), layer_depth, camera)

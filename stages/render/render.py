@@ -29,8 +29,8 @@ import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, grain_shapes, hidden_at_rest, lattice_spacing,
-                       surface_under)
+from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, grain_shapes, hidden_at_rest,
+                       lattice_spacing, surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -50,15 +50,16 @@ class Particles(NamedTuple):
     """Every particle of the trajectories as rendered: the G Gaussians, then the fill particles
     (interior.py). Tensors (P, ...) on the render device.
 
-    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2, the shape
-    a particle takes as its material flows (interior.Mixing), a round grain of GRAIN_SIGMA times the
-    cube root of its volume (its rest covariance where its object has no lattice); opacities (P,); opaque_at_rest (P,)
-    0 for a fill particle that would show at rest (interior.hidden_at_rest), which is transparent until
-    its material flows, else 1; colors (P, 3); rest_seen (P,) visibility in the photograph
-    (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
-    takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
-    grain_shade (P,) the relative brightness a grain of granular material takes as it flows
-    (interior.grain_shades), 0 for the others.
+    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2, and
+    grain_opacities (P,), the shape and opacity a particle takes as its material flows
+    (interior.Mixing): a round grain of its share of the volume, hard for sand and snow
+    (interior.grain_shapes; its rest covariance and opacity where its object has no lattice);
+    opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
+    (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3);
+    rest_seen (P,) visibility in the photograph (source_map.rest_visibility; 0 for the interior);
+    rest_normals (P, 3) world frame (the interior takes the normal of the surface it lies under);
+    surface (P,) 1 for a Gaussian, 0 for the interior; grain_shade (P,) the relative brightness a
+    grain of granular material takes as it flows (interior.grain_shades), 0 for the others.
     """
 
     rest_means: torch.Tensor

@@ -67,12 +67,17 @@ def shifted_run():
     return gaussians, shifts, coarse, enhance_frames(coarse, gaussians, threshold=0.5)
 
 
+def reconstruction_render(gaussians, width: int, height: int) -> splat.Render:
+    """splat's render of the reconstruction's Gaussians alone, at rest, from the input camera."""
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, width, height)
+    return splat.rasterize(t(gaussians.means), t(gaussians.opacities), t(gaussians.colors), camera,
+                           scales=t(gaussians.scales), rotations=t(gaussians.rotations))
+
+
 def test_frame0_is_the_reconstruction_render(shifted_run):
     gaussians, _, coarse, _ = shifted_run
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, W, H)
-    direct = splat.rasterize(t(gaussians.means), t(gaussians.opacities), t(gaussians.colors), camera,
-                             scales=t(gaussians.scales), rotations=t(gaussians.rotations))
+    direct = reconstruction_render(gaussians, W, H)
     assert np.abs(coarse.alpha[0] - direct.alpha.numpy()).max() < 1e-5
     expected_rgb = (direct.features.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
     assert np.abs(coarse.rgb[0].astype(int) - expected_rgb).max() <= 1

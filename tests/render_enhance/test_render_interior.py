@@ -20,7 +20,7 @@ from stages.render.render import render_video
 from stages.simulate.fill import fill_object
 from stages.simulate.simulation import Simulation
 
-from .test_render_flow import surfel_sphere
+from .test_render_flow import reconstruction_render, surfel_sphere
 
 SIZE, FOCAL = 96, 200.0
 PULL = [{"type": "velocity", "region": {"box": [0, 0, 0, 0.3, 1, 1]}, "velocity": [-0.6, 0, 0]},
@@ -118,10 +118,7 @@ def test_continuous_material_is_opaque_at_every_frame(simulated):
 def test_frame0_is_the_surface_render(simulated):
     """At rest the interior is hidden: frame 0 equals the render of the surface Gaussians alone."""
     _, gaussians, _, coarse = simulated
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, SIZE, SIZE)
-    surface = splat.rasterize(t(gaussians.means), t(gaussians.opacities), t(gaussians.colors), camera,
-                              scales=t(gaussians.scales), rotations=t(gaussians.rotations))
+    surface = reconstruction_render(gaussians, SIZE, SIZE)
     assert np.abs(coarse.alpha[0] - surface.alpha.numpy()).max() < 2 / 255
     expected = (surface.features.clamp(0, 1).numpy() * 255 + 0.5).astype(int)
     assert np.abs(coarse.rgb[0].astype(int) - expected).max() <= 2
