@@ -75,15 +75,18 @@ class Particles(NamedTuple):
     surface: torch.Tensor
     grain_shade: torch.Tensor
 
-    def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(P, 3, 3) covariances, (P,) opacities and (P, 3) colours of a frame whose particles are at
-        ``positions`` (P, 3) with deformation gradients ``F`` (P, 3, 3); call once per frame, in order
-        (Mixing keeps its past)."""
+    def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """(P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,) surface weights of a frame
+        whose particles are at ``positions`` (P, 3) with deformation gradients ``F`` (P, 3, 3); call
+        once per frame, in order (Mixing keeps its past). The surface weight is 1 for a Gaussian that
+        is still a patch of the photographed surface, falling to 0 as it turns into a grain of
+        flowing material (whose colour then stands for the material, not for its place in the
+        photograph), and 0 for the interior."""
         mixed = self.mixing(positions, F)
         shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
         colors = (self.colors * (1 + mixed * self.grain_shade)[:, None]).clamp(0, 1)
         opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
-        return F @ shape @ F.transpose(1, 2), opacities, colors
+        return F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
 
 
 def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, camera: splat.Camera,
@@ -141,14 +144,14 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
              100 * float((rest_seen[:G] > 0.5).float().mean()), trajectories.positions.shape[0],
              camera.width, camera.height)
 
-    is_surface = particles.surface[:, None].to(particles.colors.dtype)
     T = trajectories.positions.shape[0]
     out = {k: [] for k in ("rgb", "alpha", "depth", "source_uv", "source_coherence", "source_confidence", "normal")}
     with torch.no_grad():
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
-            covariances, opacities, colors = particles.at(F, means)
-            render = splat.rasterize(means, opacities, torch.cat([colors, is_surface], 1), camera,
+            covariances, opacities, colors, surface_weights = particles.at(F, means)
+            render = splat.rasterize(means, opacities, torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1),
+                                     camera,
                                      covariances=covariances)
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)

@@ -180,7 +180,8 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     frames = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=False)
     gaussians.photo[:] = photo
     rendered = coarse.rgb[-1].astype(float) / coarse.alpha[-1][..., None]
-    assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 2
+    # within the rgb's rounding (0.5 / alpha) and the at most 1 % of background behind alpha > 0.99 (2.55)
+    assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 0.5 / 0.99 + 0.01 * 255
 
 
 
