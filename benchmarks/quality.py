@@ -137,7 +137,8 @@ def enhancement_section(results: Path) -> str:
     video.mp4 (H.264 yuv420p halves the chroma resolution) and of the coarse render blended
     over the inpainted background; sharpness: variance of the Laplacian of the enhanced frames
     inside the object (rendered alpha > 0.5, eroded by 3 px) over the first second, as a ratio
-    to the photograph's inside its mask (likewise eroded; min / mean over frames); beside it the
+    to the photograph's inside its mask (likewise eroded; min / mean over frames), and its mean over the
+    last half second (where sand has come to rest as a heap); beside it the
     same ratio for the moved photograph, the photograph read at source_uv over the whole object
     with no render fallback: the Laplacian's variance grows as 1/s^4 when a surface's image
     shrinks by s (foreshortened, compressed), so a moving object's own detail is not the
@@ -149,13 +150,13 @@ def enhancement_section(results: Path) -> str:
     consecutive decoded frames of the pixels no frame's object ever covers.
     """
     rows = ["| scene | frames | frame-0 PSNR enhanced dB | decoded video dB | coarse dB "
-            "| sharpness ratio min / mean / max (1st s) | moved photograph's | photograph shifted 1/4, 1/2 px "
-            "| area scale | flicker (/255) |",
-            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+            "| sharpness ratio min / mean / max (1st s) | last 1/2 s | moved photograph's "
+            "| photograph shifted 1/4, 1/2 px | area scale | flicker (/255) |",
+            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for scene_file in sorted((ROOT / "scenes").glob("*/scene.yaml")):
         name, folder = scene_file.parent.name, results / scene_file.parent.name
         if not (folder / "video.mp4").exists():
-            rows.append(f"| {name} | missing: run `make demo` first | | | | | | | | |")
+            rows.append(f"| {name} | missing: run `make demo` first | | | | | | | | | |")
             continue
         scene = load_scene(scene_file)
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
@@ -171,6 +172,8 @@ def enhancement_section(results: Path) -> str:
         photo_sharpness = _variance_of_laplacian(photo, photo_mask)
         first_second = [t for t in range(min(len(enhanced), int(round(fps)) + 1)) if (coarse.alpha[t] > 0.5).sum() > 100]
         ratios = [_variance_of_laplacian(enhanced[t], coarse.alpha[t] > 0.5) / photo_sharpness for t in first_second]
+        last_half = [t for t in first_second if t >= len(enhanced) - 1 - fps / 2]
+        settled = np.mean([ratios[first_second.index(t)] for t in last_half]) if last_half else float("nan")
         # The moved photograph: the object read from the photograph at source_uv everywhere, no render fallback
         fine_photo = flow.band_limited_upsample(photo)
         moved, area = [], []
@@ -183,7 +186,7 @@ def enhancement_section(results: Path) -> str:
         flicker = np.abs(np.diff(video.astype(np.int16), axis=0))[:, never_covered].mean()
         rows.append(f"| {name} | {len(video)} | {_psnr(enhanced[0], photo):.1f} | {_psnr(video[0], photo):.1f} "
                     f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} / {max(ratios):.2f} "
-                    f"| {min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f} | "
+                    f"| {settled:.2f} | {min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f} | "
                     + ", ".join(f"{_variance_of_laplacian(_shifted(fine_photo, d), photo_mask) / photo_sharpness:.2f}"
                                 for d in (0.25, 0.5)) + f" | {min(area):.2f}-{max(area):.2f} | {flicker:.2f} |")
     return "\n".join(rows)

@@ -141,7 +141,7 @@ class TrajectoriesArtifact(Artifact):
     """trajectories.h5, written by pm-simulate. P particles (the G Gaussians first), T frames."""
 
     SCHEMA: ClassVar[str] = "physmotion.trajectories"
-    VERSION: ClassVar[int] = 1
+    VERSION: ClassVar[int] = 2
     NONEMPTY: ClassVar[tuple] = ("P", "G", "T")
 
     rest_positions: Annotated[Array, _f("/particles/rest_positions", "f4", "P,3")]
@@ -151,7 +151,7 @@ class TrajectoriesArtifact(Artifact):
     object_id: Annotated[Array, _f("/particles/object_id", "i4", "P")]
     is_gaussian: Annotated[Array, _f("/particles/is_gaussian", "bool", "P")]
     positions: Annotated[Array, _f("/frames/positions", "f4", "T,P,3", frames=True)]
-    F: Annotated[Array, _f("/frames/F", "f4", "T,G,3,3", frames=True)]
+    F: Annotated[Array, _f("/frames/F", "f4", "T,P,3,3", frames=True)]
     time_s: Annotated[Array, _f("/diagnostics/time_s", "f8", "T")]
     substeps: Annotated[Array, _f("/diagnostics/substeps", "f8", "T")]
     kinetic_energy: Annotated[Array, _f("/diagnostics/kinetic_energy", "f8", "T")]

@@ -4,6 +4,8 @@ OpenCV's wheels cannot write H.264, so every program writes video here.
 """
 from __future__ import annotations
 
+import contextlib
+import ctypes
 import io
 from fractions import Fraction
 from pathlib import Path
@@ -15,6 +17,29 @@ from .files import write_file
 
 X264_THREADS = 4
 """Encoder threads, fixed (see write_video); x264 runs them on however many cores there are."""
+M_PERTURB, PERTURB_BYTE = -6, 0x5A
+"""glibc's mallopt parameter that fills every block malloc hands out with one byte, and that byte."""
+
+
+@contextlib.contextmanager
+def filled_allocations():
+    """While in the block, every block malloc returns is filled with PERTURB_BYTE (glibc's M_PERTURB).
+
+    The encoding path (libx264 through libavcodec) reads memory it never wrote: the bytes of a video
+    followed what the process had freed before (the same frames encoded after a render, or after
+    other allocations, came out different: pm-render's coarse.mp4 differed between two runs of the
+    same inputs in one of three). Filled, they are the same whatever ran before. Without glibc's
+    mallopt nothing changes."""
+    mallopt = getattr(ctypes.CDLL(None), "mallopt", None)
+    if mallopt is None:
+        yield
+        return
+    mallopt.argtypes = [ctypes.c_int, ctypes.c_int]
+    mallopt(M_PERTURB, PERTURB_BYTE)
+    try:
+        yield
+    finally:
+        mallopt(M_PERTURB, 0)
 
 
 def even_size(width: int, height: int) -> tuple[int, int]:
@@ -39,7 +64,7 @@ def write_video(path: Path | str, frames: np.ndarray, fps: float, crf: int = 14)
         raise ValueError(f"frames must be (T, h, w, 3) uint8, got {frames.shape} {frames.dtype}")
     width, height = even_size(frames.shape[2], frames.shape[1])
     encoded = io.BytesIO()
-    with av.open(encoded, mode="w", format="mp4") as container:
+    with filled_allocations(), av.open(encoded, mode="w", format="mp4") as container:
         stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
         stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
         # x264 splits the work by its thread count, and its output depends on that count: left to x264

@@ -15,8 +15,10 @@ from .render import render_video
 log = logging.getLogger("physmotion.render")
 
 DESCRIPTION = """\
-Render every simulated frame through the splat rasterizer from the input camera: Gaussian k
-at x_k(t) with covariance F_k H_k F_k^T. Writes coarse.h5 (rgb over black, alpha, depth,
+Render every simulated frame through the splat rasterizer from the input camera: every particle
+k at x_k(t) with covariance F_k H_k F_k^T, the surface Gaussians as reconstructed and the
+interior's fill particles as the body's material (hidden behind the surface at rest, shown
+where it opens; grains where the material flows). Writes coarse.h5 (rgb over black, alpha, depth,
 source_uv = where each surface was in the photograph at rest, source_coherence = how smoothly
 the photograph maps there, source_confidence = how visible that surface was in it, times the
 coherence, normal = the surface's normal now) and an H.264 preview of the rgb frames. Width

@@ -1,28 +1,36 @@
-"""Coarse frames: the simulated Gaussians through splat, from the input camera (paper Sec. 3.2).
+"""Coarse frames: the simulated particles through splat, from the input camera (paper Sec. 3.2).
 
-Each Gaussian k at frame t sits at x_k(t) with covariance F_k H_k F_k^T (H_k its
-rest covariance, F_k the deformation gradient from the simulation). Beside the
-colour we render, in a second pass voted by what the frame itself shows, each
-Gaussian's affine map back into the photograph at rest, its surface normal now
-and its visibility at rest (source_map.py). Their blend gives ``source_uv``
-(where each pixel's surface was in the photograph; for a surface the photograph
-never saw, the point of the photograph in front of it, whose colour the
-reconstruction gave it), ``source_coherence`` (how smoothly the photograph maps
-onto the frame there, and how well the surface in front agrees on where each
-pixel came from), ``source_confidence`` (how visible the surface was at
+Every particle is rendered: the G surface Gaussians as reconstructed, and the
+fill particles behind them as Gaussians of the interior's material
+(interior.py). Particle k at frame t sits at x_k(t) with covariance
+F_k H_k F_k^T (H_k its rest covariance, F_k its deformation gradient from the
+simulation). Beside the colour we render, in a second pass voted by what the
+frame itself shows, each particle's affine map back into the photograph at rest,
+its surface normal now, its visibility at rest (source_map.py; 0 for the
+interior, which the photograph never saw) and whether it is surface or interior.
+Their blend gives ``source_uv`` (where each pixel's surface was in the
+photograph; for a surface the photograph never saw, the point of the photograph
+in front of it, whose colour the reconstruction gave it), ``source_coherence``
+(how smoothly the photograph maps onto the frame there, how well the surface in
+front agrees on where each pixel came from, and how much of it is surface
+rather than interior), ``source_confidence`` (how visible the surface was at
 rest, times the coherence) and ``normal``: the flow enhancement reads the
 photograph through them and re-shades it.
 """
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
+import numpy as np
 import torch
 
 import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
 from schemas.video import even_size
 
+from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, grain_shapes, hidden_at_rest,
+                       lattice_spacing, surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -38,31 +46,115 @@ def render_camera(gaussians: GaussiansArtifact, width: int) -> splat.Camera:
     return splat.Camera(torch.as_tensor(K), torch.as_tensor(gaussians.world_to_camera), w, h)
 
 
+class Particles(NamedTuple):
+    """Every particle of the trajectories as rendered: the G Gaussians, then the fill particles
+    (interior.py). Tensors (P, ...) on the render device.
+
+    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2, and
+    grain_opacities (P,), the shape and opacity a particle takes as its material flows
+    (interior.Mixing): a round grain of its share of the volume, hard for sand and snow
+    (interior.grain_shapes; its rest covariance and opacity where its object has no lattice);
+    opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
+    (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3);
+    rest_seen (P,) visibility in the photograph (source_map.rest_visibility; 0 for the interior);
+    rest_normals (P, 3) world frame (the interior takes the normal of the surface it lies under);
+    surface (P,) 1 for a Gaussian, 0 for the interior; grain_shade (P,) the relative brightness a
+    grain of granular material takes as it flows (interior.grain_shades), 0 for the others.
+    """
+
+    rest_means: torch.Tensor
+    rest_covariances: torch.Tensor
+    grain_covariances: torch.Tensor
+    mixing: Mixing
+    opacities: torch.Tensor
+    grain_opacities: torch.Tensor
+    opaque_at_rest: torch.Tensor
+    colors: torch.Tensor
+    rest_seen: torch.Tensor
+    rest_normals: torch.Tensor
+    surface: torch.Tensor
+    grain_shade: torch.Tensor
+
+    def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        """(P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,) surface weights of a frame
+        whose particles are at ``positions`` (P, 3) with deformation gradients ``F`` (P, 3, 3); call
+        once per frame, in order (Mixing keeps its past). The surface weight is 1 for a Gaussian that
+        is still a patch of the photographed surface, falling to 0 as it turns into a grain of
+        flowing material (whose colour then stands for the material, not for its place in the
+        photograph), and 0 for the interior."""
+        mixed = self.mixing(positions, F)
+        shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
+        colors = (self.colors * (1 + mixed * self.grain_shade)[:, None]).clamp(0, 1)
+        opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
+        return F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
+
+
+def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, camera: splat.Camera,
+                       device: str) -> Particles:
+    """The Gaussians and the interior of the trajectories, as rendered (see Particles)."""
+    t = lambda a: torch.as_tensor(a, device=device)  # noqa: E731
+    G = gaussians.means.shape[0]
+    means, opacities, colors = t(gaussians.means), t(gaussians.opacities), t(gaussians.colors)
+    covariances = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
+    rest_seen = rest_visibility(means, covariances, opacities, gaussians)
+    normals = surface_normals(means)
+    fill = ~trajectories.is_gaussian
+    under = t(surface_under(trajectories.rest_positions[fill], trajectories.object_id[fill], gaussians.means,
+                            gaussians.object_id, gaussians.opacities))
+    fill_means = t(trajectories.rest_positions[fill]).to(means.dtype)
+    spacing = t(lattice_spacing(trajectories.rest_positions, trajectories.is_gaussian,
+                                trajectories.object_id)).to(means.dtype)
+    sigma, hidden = hidden_at_rest(fill_means, GRAIN_SIGMA * spacing[G:], spacing[G:], means, covariances, opacities,
+                                   camera)
+    N = len(sigma)
+    log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
+             "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
+    eye = torch.eye(3, dtype=covariances.dtype, device=device)
+    rest_covariances = torch.cat([covariances, sigma[:, None, None] ** 2 * eye])
+    opacities = torch.cat([opacities, torch.full((N,), INTERIOR_OPACITY, dtype=opacities.dtype, device=device)])
+    grain_sigma, grain_opacities = grain_shapes(trajectories.volumes, trajectories.material_id, opacities.cpu().numpy())
+    grain = t(grain_sigma).to(spacing.dtype)[:, None, None]
+    rest_means = torch.cat([means, fill_means])
+    return Particles(
+        rest_means=rest_means, rest_covariances=rest_covariances,
+        grain_covariances=torch.where(spacing.isfinite()[:, None, None], grain ** 2 * eye, rest_covariances),
+        mixing=Mixing(rest_means, trajectories.object_id, spacing),
+        opacities=opacities,
+        grain_opacities=torch.where(spacing.isfinite(), t(grain_opacities).to(opacities.dtype), opacities),
+        opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
+        colors=torch.cat([colors, colors[under]]),
+        rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
+        rest_normals=torch.cat([normals, normals[under]]),
+        surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
+        grain_shade=t(grain_shades(trajectories.material_id)).to(colors.dtype))
+
+
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
                  device: str) -> CoarseArtifact:
     """Render every frame of the trajectories; see the module docstring for the channels."""
     G = gaussians.means.shape[0]
-    if trajectories.F.shape[1] != G:
-        raise ValueError(f"trajectories hold {trajectories.F.shape[1]} Gaussians, gaussians.h5 {G}")
+    if int(trajectories.is_gaussian.sum()) != G or not trajectories.is_gaussian[:G].all():
+        raise ValueError(f"trajectories hold {int(trajectories.is_gaussian.sum())} Gaussians, gaussians.h5 {G}")
     t = lambda a: torch.as_tensor(a, device=device)  # noqa: E731
     camera = render_camera(gaussians, width)
     scale = camera.width / gaussians.width  # photo pixels -> output pixels
-    rest_means, opacities, colors = t(gaussians.means), t(gaussians.opacities), t(gaussians.colors)
-    rest_cov = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
-    rest_seen = rest_visibility(rest_means, rest_cov, opacities, gaussians)
-    rest_normals = surface_normals(rest_means)
-    log.info("%d Gaussians, %.0f%% visible in the photograph; rendering %d frames at %dx%d",
-             G, 100 * float((rest_seen > 0.5).float().mean()), trajectories.positions.shape[0],
+    particles = rendered_particles(gaussians, trajectories, camera, device)
+    rest_means, rest_seen, rest_normals = particles.rest_means, particles.rest_seen, particles.rest_normals
+    log.info("%.0f%% of the Gaussians visible in the photograph; rendering %d frames at %dx%d",
+             100 * float((rest_seen[:G] > 0.5).float().mean()), trajectories.positions.shape[0],
              camera.width, camera.height)
 
     T = trajectories.positions.shape[0]
     out = {k: [] for k in ("rgb", "alpha", "depth", "source_uv", "source_coherence", "source_confidence", "normal")}
     with torch.no_grad():
         for frame in range(T):
-            F, means = t(trajectories.F[frame]), t(trajectories.positions[frame, :G])
-            covariances = F @ rest_cov @ F.transpose(1, 2)
-            render = splat.rasterize(means, opacities, colors, camera, covariances=covariances)
+            F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
+            covariances, opacities, colors, surface_weights = particles.at(F, means)
+            render = splat.rasterize(means, opacities, torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1),
+                                     camera,
+                                     covariances=covariances)
             alpha = render.alpha
+            rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA
             # Only the surface in front decides a pixel's source: what leaks through it from behind
             # (the far side, which maps to elsewhere in the photograph) would scatter the map.
@@ -87,8 +179,12 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             seen_fraction = (seen[..., 0] / voted).clamp(0, 1)
             front_votes = front_votes[..., 0]
             spread = source_spread(front_moments, front_votes, source_points(front_maps, front_votes))
-            smooth = torch.where(covered, coherence(source_roughness(source_uv) * scale, spread * scale), 0.0)
-            out["rgb"].append((render.features.clamp(0, 1) * 255 + 0.5).to(torch.uint8))
+            # how much of what the pixel shows is surface, by the colour pass's own blending weights;
+            # where nothing is covered there is no interior in front either
+            surface_share = torch.where(covered, (surface_weight[..., 0] / alpha.clamp_min(MIN_ALPHA)).clamp(0, 1), 1.0)
+            smooth = torch.where(covered, coherence(source_roughness(source_uv) * scale, spread * scale,
+                                                    surface_share), 0.0)
+            out["rgb"].append((rgb.clamp(0, 1) * 255 + 0.5).to(torch.uint8))
             out["alpha"].append(alpha)
             out["depth"].append(render.depth)
             out["source_uv"].append(source_uv)

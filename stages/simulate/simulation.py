@@ -5,7 +5,7 @@ interior fill), the simulation frame, the ground under the objects' centres of
 mass and the grid, the materials, conditions and rigid bodies; `run` first
 settles the deformable bodies into the stress that holds their photographed
 shape up (rest_state.py), then steps the MPM solver frame by frame with CFL
-substeps and records positions, the Gaussians' deformation gradients and
+substeps and records positions, every particle's deformation gradient and
 diagnostics, all in the world (camera) frame.
 """
 from __future__ import annotations
@@ -117,7 +117,7 @@ class Simulation:
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
         self._free_logged = self._outside_logged = 0
         self._camera = None if silhouette is None else (silhouette[1], silhouette[0].shape)  # K, (H, W)
-        self._rest_F_inverse = np.eye(3)  # settle() sets the Gaussians' F of the loaded rest state
+        self._rest_F_inverse = np.eye(3)  # settle() sets every particle's F of the loaded rest state
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
         log.info("%d particles (%d Gaussians + %d fill), grid %s of %.1f mm cells, %d frames",
@@ -264,7 +264,7 @@ class Simulation:
             for k, h in zip(deformable, heights):
                 self._warn_unsettled(k, h, rest_sim[self.object_id == k], settled[self.object_id == k], steps * dt)
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
-        self._rest_F_inverse = np.linalg.inv(s.F.numpy()[: self.n_gaussians].astype(np.float64))
+        self._rest_F_inverse = np.linalg.inv(s.F.numpy().astype(np.float64))
         elapsed = time.perf_counter() - started
         log.info("settled objects %s into their weight: %d substeps (%.3f s, %d kinetic peaks, the last %.1e of "
                  "the first), largest sag %.2f mm, taken as the photographed shape's load (%.0f s)", deformable,
@@ -290,7 +290,7 @@ class Simulation:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
         T, G, P = self.n_frames, self.n_gaussians, len(self.masses)
         positions = np.zeros((T, P, 3), np.float32)
-        F = np.zeros((T, G, 3, 3), np.float32)
+        F = np.zeros((T, P, 3, 3), np.float32)
         diag = {k: np.zeros((T,) + s) for k, s in [("kinetic_energy", ()), ("potential_energy", ()), ("momentum", (3,)),
                                                    ("angular_momentum", (3,)), ("max_speed", ()), ("substeps", ())]}
         times = np.arange(T) / self.physics.fps
@@ -327,14 +327,14 @@ class Simulation:
             fps=float(self.physics.fps), duration_s=float(self.physics.duration_s), **diag)
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:
-        """Store frame f: world positions, world F of the Gaussians, and the diagnostics."""
+        """Store frame f: world positions, world F of every particle, and the diagnostics."""
         s = self.solver
         x_sim = s.x.numpy().astype(np.float64)
         v = s.v.numpy().astype(np.float64) @ self.Q  # world = Q^T sim, for row vectors
         x = x_sim @ self.Q
         positions[f] = x
         # the deformation since the photograph: the settled load's F is the rest state
-        F[f] = self.Q.T @ (s.F.numpy()[: self.n_gaussians] @ self._rest_F_inverse) @ self.Q
+        F[f] = self.Q.T @ (s.F.numpy() @ self._rest_F_inverse) @ self.Q
         m = self.masses
         wp.launch(elastic_energy, dim=len(m), device=self.device,
                   inputs=[s.materials, s.object_id, s.volume, s.F, s.history, self._energy])

@@ -30,7 +30,7 @@ def random_trajectories(T=3, P=9, G=4, seed=1) -> TrajectoriesArtifact:
     return TrajectoriesArtifact(
         rest_positions=r.random((P, 3)), volumes=r.random(P), masses=r.random(P), material_id=np.zeros(P),
         object_id=np.zeros(P), is_gaussian=np.arange(P) < G, positions=r.random((T, P, 3)),
-        F=r.random((T, G, 3, 3)), time_s=np.arange(T) / 8, substeps=np.full(T, 5.0), kinetic_energy=r.random(T),
+        F=r.random((T, P, 3, 3)), time_s=np.arange(T) / 8, substeps=np.full(T, 5.0), kinetic_energy=r.random(T),
         potential_energy=r.random(T), momentum=r.random((T, 3)), angular_momentum=r.random((T, 3)),
         max_speed=r.random(T), fps=8.0, duration_s=0.25)
 
@@ -107,6 +107,19 @@ def test_wrong_version_is_refused(tmp_path):
     with pytest.raises(InputError) as info:
         read_artifact(tmp_path / "g.h5", GaussiansArtifact)
     assert info.value.field == "schema_version" and "99" in info.value.problem
+
+
+def test_trajectories_of_the_gaussians_only_layout_are_refused(tmp_path):
+    """Version 1 held F for the G Gaussians only (T,G,3,3); version 2 holds it for every particle."""
+    write_artifact(tmp_path / "t.h5", random_trajectories(), created_by="pm-simulate", config_hash="h")
+    with h5py.File(tmp_path / "t.h5", "a") as f:
+        f.attrs["schema_version"] = 1
+        del f["/frames/F"]
+        f["/frames/F"] = np.zeros((3, 4, 3, 3), np.float32)
+    with pytest.raises(InputError) as info:
+        read_artifact(tmp_path / "t.h5", TrajectoriesArtifact)
+    assert info.value.field == "schema_version" and "version 1" in info.value.problem
+    assert "reads version 2" in info.value.problem and "rerun" in info.value.fix
 
 
 def test_missing_dataset_is_named(tmp_path):

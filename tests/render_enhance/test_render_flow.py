@@ -67,12 +67,17 @@ def shifted_run():
     return gaussians, shifts, coarse, enhance_frames(coarse, gaussians, threshold=0.5)
 
 
+def reconstruction_render(gaussians, width: int, height: int) -> splat.Render:
+    """splat's render of the reconstruction's Gaussians alone, at rest, from the input camera."""
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, width, height)
+    return splat.rasterize(t(gaussians.means), t(gaussians.opacities), t(gaussians.colors), camera,
+                           scales=t(gaussians.scales), rotations=t(gaussians.rotations))
+
+
 def test_frame0_is_the_reconstruction_render(shifted_run):
     gaussians, _, coarse, _ = shifted_run
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, W, H)
-    direct = splat.rasterize(t(gaussians.means), t(gaussians.opacities), t(gaussians.colors), camera,
-                             scales=t(gaussians.scales), rotations=t(gaussians.rotations))
+    direct = reconstruction_render(gaussians, W, H)
     assert np.abs(coarse.alpha[0] - direct.alpha.numpy()).max() < 1e-5
     expected_rgb = (direct.features.clamp(0, 1).numpy() * 255 + 0.5).astype(np.uint8)
     assert np.abs(coarse.rgb[0].astype(int) - expected_rgb).max() <= 1
@@ -220,11 +225,10 @@ def test_photograph_lookup_shifts_fine_detail_without_softening_it():
     assert np.abs(whole - image)[inner].max() < 1e-2
 
 
-def turned_sphere(turn_deg: float, n: int = 6000, radius_m: float = 0.1, distance_m: float = 1.0,
-                  focal: float = 200.0, size: int = 96):
-    """Surfels tangent to a sphere in front of the camera (they cover its far side too), the
-    photograph the render of them at rest, and trajectories whose frame 1 turns the sphere by
-    ``turn_deg`` about the vertical axis through its centre."""
+def surfel_sphere(n: int = 6000, radius_m: float = 0.1, distance_m: float = 1.0, focal: float = 200.0,
+                  size: int = 96) -> GaussiansArtifact:
+    """Surfels tangent to a sphere of radius_m, distance_m in front of the camera (they cover its far side
+    too), textured; the photograph black, the camera's focal length ``focal`` px, its image size x size."""
     golden = np.pi * (3 - np.sqrt(5))
     k = np.arange(n) + 0.5
     z = 1 - 2 * k / n
@@ -235,13 +239,20 @@ def turned_sphere(turn_deg: float, n: int = 6000, radius_m: float = 0.1, distanc
     quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
     K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]])
     colours = 0.5 + 0.4 * np.sin(40 * normals)  # any texture: the test reads source_uv, not colour
-    gaussians = GaussiansArtifact(
+    return GaussiansArtifact(
         K=K, world_to_camera=np.eye(4), width=size, height=size, means=centre + radius_m * normals,
         scales=np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations=quaternions,
         opacities=np.full(n, 0.9), colors=colours, object_id=np.zeros(n),
         photo=np.zeros((size, size, 3), np.uint8), mask=np.ones((size, size), np.uint8),
         background=np.zeros((size, size, 3), np.uint8), depth_prior=np.full((size, size), distance_m),
         loss=np.zeros((0, 1)), loss_terms=["none"])
+
+
+def turned_sphere(turn_deg: float, radius_m: float = 0.1, distance_m: float = 1.0):
+    """surfel_sphere, and trajectories whose frame 1 turns it by ``turn_deg`` about the vertical axis
+    through its centre."""
+    gaussians = surfel_sphere(radius_m=radius_m, distance_m=distance_m)
+    centre = np.array([0.0, 0.0, distance_m])
     angle = np.radians(turn_deg)
     turn = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
     trajectories = translated(gaussians, [0, 0])

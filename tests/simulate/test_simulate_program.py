@@ -152,10 +152,11 @@ def test_program_writes_trajectories_and_setup_png(tmp_path):
               "--out", str(out), "--device", "cpu"])
     tr = read_artifact(out, TrajectoriesArtifact)
     G = len(means)
-    assert tr.positions.shape[0] == 3 and tr.F.shape == (3, G, 3, 3)
+    P = len(tr.masses)
+    assert tr.positions.shape[0] == 3 and tr.F.shape == (3, P, 3, 3) and P > G
     np.testing.assert_allclose(tr.positions[0, :G], means, atol=1e-6)
     np.testing.assert_allclose(tr.rest_positions, tr.positions[0], atol=1e-6)
-    np.testing.assert_allclose(tr.F[0], np.broadcast_to(np.eye(3), (G, 3, 3)), atol=1e-6)
+    np.testing.assert_allclose(tr.F[0], np.broadcast_to(np.eye(3), (P, 3, 3)), atol=1e-6)
     assert tr.is_gaussian[:G].all() and not tr.is_gaussian[G:].any()
     assert set(np.unique(tr.material_id)) == {M.PRESETS.index("jelly"), M.PRESETS.index("metal")}
     assert tr.masses[tr.object_id == 1].sum() == pytest.approx(3000 * 0.08 ** 3, rel=0.25)

@@ -1,0 +1,291 @@
+"""The appearance of the fill particles: the body's material where the surface opens.
+
+pm-simulate fills each object's volume with a lattice of particles behind its
+surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
+a Gaussian of its own (as PhysGaussian renders its filled particles):
+
+- colour: that of the surface it lies under, the nearest opaque Gaussian of its
+  object at rest (:func:`surface_under`); its rest normal is that Gaussian's too;
+- opacity: :data:`INTERIOR_OPACITY`, solid material;
+- covariance: round, of standard deviation :data:`GRAIN_SIGMA` lattice spacings
+  (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
+
+Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
+surface Gaussians included, becomes a round grain of its share of the volume
+(:func:`grain_shapes`: hard, opaque discs for sand and snow, soft for a torn solid),
+and grains of granular materials each take a brightness of their own (:func:`grain_shades`).
+
+At rest the interior must stay hidden behind the surface, so that frame 0 is the
+reconstruction's render. The lattice's outer cells reach up to a cell past the
+Gaussians (stages/simulate/fill.py), and a reconstruction's surface is not
+opaque everywhere, so some particles would show at rest: :func:`hidden_at_rest`
+narrows those near the silhouette and finds the ones that would still show, from
+forward renders only (:func:`exposure`), so that the choice is the same bytes on
+every run and thread count.
+Those are transparent at rest and become opaque as their material flows or tears
+(:class:`Mixing`, which also grows the narrowed ones back to full grains): the
+interior appears where the surface opens, and only there.
+"""
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import torch
+from scipy.spatial import cKDTree
+
+import splat
+from schemas.materials import PRESETS
+
+from .source_map import project, to_camera
+
+GRAIN_SIGMA = 0.5
+"""Standard deviation of a fill particle's Gaussian at rest, in lattice spacings. Neighbours half a
+spacing from a point between them cover it each with alpha e^-0.5: a lattice seen through one layer
+is opaque (alpha >= 0.84 midway between four), a lone grain is a grain of about the spacing."""
+INTERIOR_OPACITY = 1.0
+"""Opacity of a fill particle (the rasterizer clamps each Gaussian's alpha to 0.99)."""
+OPAQUE_ALPHA = 0.99
+"""Rest-render alpha from which a pixel hides what lies behind its surface."""
+OPAQUE_SURFACE = 0.5
+"""Opacity from which a surface Gaussian gives its colour to the interior under it (fainter ones are
+the reconstruction's soft edges and floaters, whose colours are mixed with the background's)."""
+GRANULAR = ("sand", "snow")
+"""The presets whose particles read as grains once they flow (grain_shades)."""
+GRAIN_OPACITY = 50.0
+"""Opacity of a grain of granular material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
+a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
+over a quarter of its radius (the edge antialiased), where a Gaussian of opacity 1 takes over 1.4 radii
+and a heap of them reads as a blur of one colour."""
+GRAIN_SHADE = 0.13
+"""Spread (standard deviation) of the grains' brightness relative to their colour: measured on
+scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
+quarter of a grain against the mean over a few grains (0.19 at an eighth, 0.13 at a quarter)."""
+FLOW_NEIGHBOURS = 8
+"""Nearest particles at rest whose motion relative to a particle tells whether its material flows (Mixing)."""
+HIDDEN_TRANSMITTANCE = 1.0 / 255
+"""Mean transmittance over its footprint up to which a fill particle counts as hidden in the render at
+rest: its colour then moves no pixel by more than about a grey level."""
+HIDING_ROUNDS = 4
+"""Rounds of dropping the fill particles that show at rest (each can uncover a few behind)."""
+LAYERS_PER_RENDER = 32
+"""Depth layers of transmittance per render (channels; transmittance_layers)."""
+REACH_SIGMAS = math.sqrt(2 * math.log(255))
+"""How far a Gaussian of opacity 1 reaches in standard deviations: to alpha 1/255 (splat's cut-off)."""
+DILATION_PX2 = 0.3
+"""splat's EWA dilation of every projected covariance (px^2)."""
+
+
+def lattice_spacing(rest_positions: np.ndarray, is_gaussian: np.ndarray, object_id: np.ndarray) -> np.ndarray:
+    """(P,) the fill lattice's spacing (m) of each particle's object: the median distance from its fill
+    particles to their nearest neighbour (fill.py lays one regular lattice per object); inf for an
+    object with fewer than two.
+
+    Args:
+        rest_positions: (P, 3) the particles at rest, m; is_gaussian, object_id: (P,).
+    """
+    spacing = np.full(len(rest_positions), np.inf)
+    for k in np.unique(object_id):
+        points = rest_positions[(object_id == k) & ~is_gaussian]
+        if len(points) >= 2:
+            spacing[object_id == k] = np.median(cKDTree(points).query(points, k=2)[0][:, 1])
+    return spacing
+
+
+def surface_under(rest_positions: np.ndarray, object_id: np.ndarray, surface_means: np.ndarray,
+                  surface_object: np.ndarray, surface_opacity: np.ndarray) -> np.ndarray:
+    """(N,) index into the surface Gaussians of the one each fill particle lies under: the nearest at
+    rest among its object's Gaussians of opacity at least OPAQUE_SURFACE (among all of them where it
+    has none so opaque).
+
+    Args:
+        rest_positions: (N, 3), object_id: (N,): the fill particles at rest.
+        surface_means: (G, 3), surface_object: (G,), surface_opacity: (G,): the Gaussians.
+    """
+    under = np.zeros(len(rest_positions), np.int64)
+    for k in np.unique(object_id):
+        members = object_id == k
+        candidates = np.flatnonzero(surface_object == k)
+        opaque = candidates[surface_opacity[candidates] >= OPAQUE_SURFACE]
+        candidates = opaque if len(opaque) else candidates
+        under[members] = candidates[cKDTree(surface_means[candidates]).query(rest_positions[members])[1]]
+    return under
+
+
+def grain_shapes(volumes: np.ndarray, material_id: np.ndarray, opacities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P,) standard deviation (m) and (P,) opacity of each particle as a grain of its share of the
+    material, once its material flows (Mixing): a ball whose alpha is 1/2 at GRAIN_SIGMA sqrt(2 ln 2)
+    cube roots of its volume (V^(1/3): the side of its share) from its centre, so that neighbours
+    overlap and a heap is opaque. Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY;
+    of the others, of the particle's own opacity (opacities, (P,)) and standard deviation
+    GRAIN_SIGMA V^(1/3): a torn face reads as solid material, not as grains.
+
+    Args:
+        volumes: (P,) m^3; material_id: (P,) index into schemas.materials.PRESETS.
+    """
+    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
+    opacity = np.where(granular, GRAIN_OPACITY, opacities)
+    # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
+    half_alpha_radius = GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * np.cbrt(volumes)
+    return np.where(granular, half_alpha_radius / np.sqrt(2 * np.log(2 * GRAIN_OPACITY)),
+                    GRAIN_SIGMA * np.cbrt(volumes)), opacity
+
+
+def grain_shades(material_id: np.ndarray) -> np.ndarray:
+    """(P,) each particle's relative brightness as a grain, GRAIN_SHADE times a standard normal number
+    (seeded: the same for every run), for the particles of granular materials (GRANULAR); 0 for the
+    others. A heap of grains of one colour is not one flat colour: each grain's facets catch the light
+    differently."""
+    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
+    return np.where(granular, GRAIN_SHADE * np.random.default_rng(0).standard_normal(len(material_id)), 0.0)
+
+
+class Mixing:
+    """How far each particle's material has flowed, in [0, 1]: 0 while its neighbourhood moves with
+    its own deformation (rigidly or elastically, however far), 1 once its neighbours have moved a
+    lattice spacing past what F predicts (granular flow, a tear), never falling back (no flicker):
+
+        mixing_i(t) = max over t' <= t of min(1, mean_j |x_j - x_i - F_i (X_j - X_i)| / spacing_i)
+
+    over its FLOW_NEIGHBOURS nearest particles j of its object at rest. A flowing surface Gaussian is
+    no longer a patch of surface: turned edge-on by the flow it would read as a streak, so the render
+    turns it into a grain of the material (render.py).
+
+    Args:
+        rest_positions: (R, 3) the rendered particles at rest, m; object_id: (R,); spacing: (R,) m
+            (lattice_spacing; inf: no lattice, never mixes).
+    """
+
+    def __init__(self, rest_positions: torch.Tensor, object_id: np.ndarray, spacing: torch.Tensor):
+        points = rest_positions.detach().cpu().double().numpy()
+        k = min(FLOW_NEIGHBOURS + 1, len(points))
+        neighbours = cKDTree(points).query(points, k=k)[1].reshape(len(points), k)[:, 1:]
+        self.neighbours = torch.as_tensor(neighbours, device=rest_positions.device)
+        self.same = torch.as_tensor(object_id[neighbours] == object_id[:, None], device=rest_positions.device)
+        self.rest_offsets = rest_positions[self.neighbours] - rest_positions[:, None]
+        self.spacing = spacing
+        self.so_far = torch.zeros(len(points), dtype=rest_positions.dtype, device=rest_positions.device)
+
+    def __call__(self, positions: torch.Tensor, F: torch.Tensor) -> torch.Tensor:
+        """(R,) the mixing up to this frame; positions (R, 3) m and F (R, 3, 3) of the frame, in order."""
+        if self.neighbours.shape[1] == 0:
+            return self.so_far
+        predicted = self.rest_offsets @ F.transpose(1, 2)
+        departed = (positions[self.neighbours] - positions[:, None] - predicted).norm(dim=-1)
+        count = self.same.sum(1).clamp_min(1)
+        mean = torch.where(self.same, departed, 0.0).sum(1) / count
+        self.so_far = torch.maximum(self.so_far, (mean / self.spacing).clamp(0, 1).nan_to_num(0.0))
+        return self.so_far
+
+
+def transmittance_layers(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor,
+                         depths: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
+    """(L, H, W) the transmittance of these Gaussians in front of each camera depth ``depths`` (L,), m.
+
+    splat composites each pixel front to back in order of the Gaussians' camera depth, so the
+    blending weights of the Gaussians nearer than a depth z sum to 1 - T(z): one render whose
+    channel l is 1 for the Gaussians nearer than depths[l] gives all L at once (LAYERS_PER_RENDER
+    channels a render). Forward renders only: the same bytes on every run and thread count.
+    """
+    z = to_camera(means, camera.world_to_camera)[:, 2]
+    layers = []
+    for group in depths.split(LAYERS_PER_RENDER):
+        nearer = (z[:, None] < group[None, :].to(z.dtype)).to(opacities.dtype)
+        nearer = torch.nn.functional.pad(nearer, (0, LAYERS_PER_RENDER - len(group)))  # one kernel for all
+        covered = splat.rasterize(means, opacities, nearer, camera, covariances=covariances).features
+        layers.append((1 - covered[..., :len(group)]).clamp(0, 1).permute(2, 0, 1))
+    return torch.cat(layers)
+
+
+def exposure(positions: torch.Tensor, sigma: torch.Tensor, means: torch.Tensor, covariances: torch.Tensor,
+             opacities: torch.Tensor, layer_depth: float, camera: splat.Camera) -> torch.Tensor:
+    """(N,) for each particle at positions (N, 3) (world, m), rendered round of standard deviation
+    sigma (N,), m, with opacity INTERIOR_OPACITY: the mean over its footprint, weighted by its own
+    alpha, of the transmittance in front of it of the other Gaussians (means, covariances,
+    opacities; those at positions among them). That is what it adds to the render over what it
+    would add alone. It is read at the nearest depth layer (of ``layer_depth`` m) in front of the
+    particle, so what lies within a layer in front of it is not counted: an upper bound."""
+    device, N = positions.device, len(positions)
+    in_camera = to_camera(positions, camera.world_to_camera)
+    z = in_camera[:, 2]
+    nearest = float(z.min())
+    layer = ((z - nearest) / layer_depth).floor().long()
+    depths = nearest + layer_depth * torch.arange(int(layer.max()) + 1, device=device, dtype=z.dtype)
+    transmittance = transmittance_layers(means, covariances, opacities, depths, camera)
+    K = torch.as_tensor(camera.K, dtype=positions.dtype, device=device)
+    uv = project(in_camera, K)
+    sigma_px2 = (sigma * K[0, 0] / z.clamp_min(1e-9)) ** 2 + DILATION_PX2
+    half = int(math.ceil(float(REACH_SIGMAS * sigma_px2.max().sqrt()))) + 1
+    steps = torch.arange(-half, half + 1, device=device)
+    offsets = torch.stack(torch.meshgrid(steps, steps, indexing="xy"), -1).reshape(-1, 2)
+    size = torch.tensor([camera.width, camera.height], device=device)
+    exposed = torch.zeros(N, dtype=transmittance.dtype, device=device)
+    for chunk in torch.arange(N, device=device).split(4096):
+        pixel = uv[chunk].floor().long()[:, None] + offsets[None]  # (n, k, 2) col, row
+        from_centre = pixel.to(uv.dtype) + 0.5 - uv[chunk, None]
+        alpha = (min(INTERIOR_OPACITY, 0.99) * torch.exp(-0.5 * (from_centre ** 2).sum(-1) / sigma_px2[chunk, None]))
+        alpha = torch.where(alpha >= 1 / 255, alpha, 0.0).to(transmittance.dtype)
+        col, row = pixel[..., 0].clamp(0, camera.width - 1), pixel[..., 1].clamp(0, camera.height - 1)
+        # off the image nothing hides it
+        seen = torch.where(((pixel >= 0) & (pixel < size)).all(-1), transmittance[layer[chunk, None], row, col], 1.0)
+        exposed[chunk] = (alpha * seen).sum(1) / alpha.sum(1).clamp_min(1e-12)
+    return exposed
+
+
+def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, spacing: torch.Tensor,
+                   surface_means: torch.Tensor, surface_covariances: torch.Tensor, surface_opacities: torch.Tensor,
+                   camera: splat.Camera) -> tuple[torch.Tensor, torch.Tensor]:
+    """(N,) each fill particle's standard deviation (m) narrowed so that it stays hidden behind the
+    surface at rest, and (N,) bool whether it does (those that do not are transparent at rest).
+
+    First each particle is narrowed so that its footprint, out to REACH_SIGMAS of its projected
+    standard deviation (with splat's dilation), stays on pixels where the surface's rest alpha is at
+    least OPAQUE_ALPHA (0 where its centre is off them). Then, rendered together with the surface at
+    rest, any particle that still shows (its exposure, the transmittance in front of it over its
+    footprint, above HIDDEN_TRANSMITTANCE: where the surface is translucent, or its Gaussians lie
+    behind the particle) is taken out, and again for what that uncovers, up to HIDING_ROUNDS times.
+    Forward renders only (:func:`exposure`): the same bytes on every run and thread count.
+
+    Args:
+        rest_positions: (N, 3) world, m; sigma: (N,) their standard deviation from the lattice, m;
+            spacing: (N,) their lattice's spacing, m (the exposure's depth layers: half the finest).
+        surface_means, surface_covariances, surface_opacities: the G surface Gaussians at rest.
+    """
+    device = rest_positions.device
+    with torch.no_grad():
+        surface = splat.rasterize(surface_means, surface_opacities, torch.zeros_like(surface_means[:, :1]), camera,
+                                  covariances=surface_covariances)
+        K = torch.as_tensor(camera.K, dtype=rest_positions.dtype, device=device)
+        in_camera = to_camera(rest_positions, camera.world_to_camera)
+        uv = project(in_camera, K)
+        opaque = (surface.alpha >= OPAQUE_ALPHA).cpu().numpy().astype(np.uint8)
+        # px from each opaque pixel's centre to the nearest pixel that is not (0 on those)
+        room = torch.as_tensor(cv2.distanceTransform(opaque, cv2.DIST_L2, cv2.DIST_MASK_PRECISE), device=device)
+        col = uv[:, 0].floor().long()
+        row = uv[:, 1].floor().long()
+        inside = (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height) & (in_camera[:, 2] > 0)
+        col, row = col.clamp(0, camera.width - 1), row.clamp(0, camera.height - 1)
+        room_px = torch.where(inside, room[row, col] - 0.5, 0.0)  # from the particle's pixel's edge
+        behind = in_camera.norm(dim=1) > surface.depth[row, col] / surface.alpha[row, col].clamp_min(OPAQUE_ALPHA)
+        px_per_m = K[0, 0] / in_camera[:, 2].clamp_min(1e-9)
+        fits_px2 = (room_px.clamp_min(0) / REACH_SIGMAS) ** 2 - DILATION_PX2
+        hidden = inside & behind & (fits_px2 > 0)
+        sigma = torch.where(hidden, torch.minimum(sigma, fits_px2.clamp_min(0).sqrt() / px_per_m), 0.0)
+        eye = torch.eye(3, dtype=surface_covariances.dtype, device=device)
+        layer_depth = 0.5 * float(spacing.min()) if len(spacing) else 1.0
+        for _ in range(HIDING_ROUNDS):
+            kept = torch.nonzero(hidden)[:, 0]
+            if len(kept) == 0:
+                break
+            exposed = exposure(
+                rest_positions[kept], sigma[kept],
+                torch.cat([surface_means, rest_positions[kept].to(surface_means.dtype)]),
+                torch.cat([surface_covariances, sigma[kept].to(eye.dtype)[:, None, None] ** 2 * eye]),
+                torch.cat([surface_opacities, torch.full((len(kept),), INTERIOR_OPACITY, dtype=surface_opacities.dtype,
+                                                         device=device)]), layer_depth, camera)
+            showing = kept[exposed > HIDDEN_TRANSMITTANCE]
+            if len(showing) == 0:
+                break
+            hidden[showing] = False
+    return torch.where(hidden, sigma, 0.0), hidden
