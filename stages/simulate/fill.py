@@ -121,8 +121,7 @@ def silhouette_gap(means: np.ndarray, mask: np.ndarray, K: np.ndarray) -> float:
     if perimeter <= 0 or len(means) < 2:
         return 0.0
     uv = up * ((means[:, :2] / means[:, 2:3]) * K[[0, 1], [0, 1]] + K[:2, 2])
-    gap_px = float(np.quantile(cKDTree(uv).query(uv, k=2)[0][:, 1], GAP_QUANTILE))
-    radius = int(np.ceil(0.5 * gap_px)) + 1
+    radius = closing_radius(uv, 1.0)  # in drawn pixels, as the fill's in lattice cells
     H, W = mask.shape
     ij = np.floor(uv).astype(int) + radius  # drawn on a canvas padded by the closing's radius
     canvas = np.zeros((up * H + 2 * radius, up * W + 2 * radius), bool)

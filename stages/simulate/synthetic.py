@@ -1,4 +1,4 @@
-"""Synthetic inputs for tests and benchmarks: Gaussians on the surface of boxes."""
+"""Synthetic inputs for tests and benchmarks: Gaussians on the surface of boxes and spheres."""
 from __future__ import annotations
 
 import numpy as np
@@ -21,3 +21,10 @@ def boxes(*extents, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Means (G,3) and object ids (G,) of one box per (lo, hi) pair, object k = k-th box."""
     means = [box_surface(lo, hi, spacing) for lo, hi in extents]
     return np.concatenate(means), np.concatenate([np.full(len(m), k) for k, m in enumerate(means)])
+
+
+def fibonacci_sphere(n: int, radius: float) -> np.ndarray:
+    """(n, 3) points spread evenly over a sphere about the origin (m)."""
+    i = np.arange(n) + 0.5
+    polar, azimuth = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
+    return radius * np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)

@@ -15,7 +15,7 @@ from scipy.spatial import cKDTree
 from schemas import materials as M
 from schemas.scene import PhysicsConfig
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import boxes
+from stages.simulate.synthetic import boxes, fibonacci_sphere
 
 G = 9.81
 CUBE = ((0.0, 0.0, 0.0), (0.1, 0.1, 0.1))
@@ -199,13 +199,6 @@ def test_ground_slip_and_coulomb_friction(device, ground):
         # and it has stopped sliding: what is left is the jelly rocking on the spot, its centre of mass
         # swinging at a few cm/s (its fastest particle reaches 0.1 m/s)
         assert np.abs(tr.momentum[-3:, 0]).max() / tr.masses.sum() < 0.1 * v0
-
-
-def fibonacci_sphere(n: int, radius: float) -> np.ndarray:
-    """(n, 3) points spread evenly over a sphere about the origin (m)."""
-    i = np.arange(n) + 0.5
-    polar, azimuth = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
-    return radius * np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
 
 
 def turned_deg(tr, frame: int) -> float:

@@ -16,7 +16,7 @@ from stages.simulate import cli, domain
 from stages.simulate.conditions import region_members
 from stages.simulate.fill import fill_object, silhouette_gap
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import box_surface, boxes
+from stages.simulate.synthetic import box_surface, boxes, fibonacci_sphere
 
 wp.config.quiet = True
 
@@ -45,9 +45,7 @@ def test_fill_volume_does_not_depend_on_the_lattice(dx):
     corner, two such boxes differed by 7.5 %)."""
     box = box_surface(np.zeros(3), np.full(3, 0.1), 0.01)
     turned = box @ np.array(cv2.Rodrigues(np.array([0.35, 0.52, 0.17]))[0]).T
-    n = np.arange(4000) + 0.5
-    polar, azimuth = np.arccos(1 - 2 * n / len(n)), math.pi * (1 + 5 ** 0.5) * n
-    ball = 0.05 * np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
+    ball = fibonacci_sphere(4000, 0.05)
 
     def volume(means):
         _, gauss_volume, fill_volume = fill_object(means, dx, 8)
@@ -67,9 +65,7 @@ def test_skin_grows_the_solid_across_the_view_only():
     K = np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1]])
     v, u = np.mgrid[0:H, 0:W] + 0.5
     mask = (u - W / 2) ** 2 + (v - H / 2) ** 2 <= (f * 0.06 / math.sqrt(z * z - 0.06 ** 2)) ** 2
-    n = np.arange(3000) + 0.5
-    polar, azimuth = np.arccos(1 - 2 * n / len(n)), math.pi * (1 + 5 ** 0.5) * n
-    means = 0.05 * np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
+    means = fibonacci_sphere(3000, 0.05)
     skin = silhouette_gap(means + [0, 0, z], mask, K)
     assert skin == pytest.approx(0.01, abs=5e-4)
     dx = 0.01
