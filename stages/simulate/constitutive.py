@@ -27,6 +27,10 @@ assert PRESETS == ("jelly", "metal", "sand", "plasticine", "foam", "snow", "rigi
 # CFL time step, stays bounded.
 SNOW_HARDENING_MIN = 0.1
 SNOW_HARDENING_MAX = 5.0
+# A yield stress (Pa) or critical stretch no state reaches: a material that does not yield.
+NO_YIELD = 1.0e30
+# The solids whose yielding the settle holds off (sand and snow settle as granular heaps).
+YIELDING_SOLIDS = ("metal", "plasticine", "foam", "fracture")
 # Singular values below this are treated as this (inverted or crushed
 # particles), so that log-strain models stay finite.
 MIN_STRETCH = 1.0e-2
@@ -58,8 +62,9 @@ def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float,
     return mu, lam
 
 
-def material_params(material) -> MaterialParams:
-    """Warp parameter struct of one `schemas.materials` preset model."""
+def material_params(material, yielding: bool = True) -> MaterialParams:
+    """Warp parameter struct of one `schemas.materials` preset model; with yielding False a solid
+    (YIELDING_SOLIDS) keeps its elasticity but neither yields nor breaks."""
     p = MaterialParams()
     p.kind = PRESETS.index(material.preset)
     p.neo_hookean = int(getattr(material, "model", "") == "neo_hookean")
@@ -74,6 +79,8 @@ def material_params(material) -> MaterialParams:
     p.critical_compression = getattr(material, "critical_compression", 0.0)
     p.critical_stretch = getattr(material, "critical_stretch", 0.0)
     p.toughness = getattr(material, "toughness", 1.0)
+    if not yielding and material.preset in YIELDING_SOLIDS:
+        p.yield_stress = p.critical_stretch = NO_YIELD
     return p
 
 
@@ -289,9 +296,9 @@ def elastic_energy_density(mat: MaterialParams, F: wp.mat33, history: float):
     return mat.mu * wp.dot(eps, eps) + 0.5 * mat.lam * tr * tr
 
 
-def params_array(materials, device) -> wp.array:
+def params_array(materials, device, yielding: bool = True) -> wp.array:
     """Device array of MaterialParams, one per object (indexed by object_id)."""
-    return wp.array([material_params(m) for m in materials], dtype=MaterialParams, device=device)
+    return wp.array([material_params(m, yielding) for m in materials], dtype=MaterialParams, device=device)
 
 
 

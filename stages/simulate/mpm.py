@@ -405,7 +405,8 @@ class MPMSolver:
         self.prescribed_velocity = wp.zeros(n, dtype=wp.vec3, device=device)
         self.free = wp.zeros(n, dtype=wp.int32, device=device)
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
-        self.materials = params_array(materials, device)
+        self.materials = self._yielding = params_array(materials, device)
+        self._elastic = params_array(materials, device, yielding=False)
         self.rigid = None
 
         nx, ny, nz = grid.shape
@@ -497,6 +498,10 @@ class MPMSolver:
             self._per_particle(flight, g2p)
             self.rigid.project(self, dt)
             self._per_particle(stress)
+
+    def hold_yield(self, held: bool) -> None:
+        """With `held`, the solids that yield or break (constitutive.YIELDING_SOLIDS) respond elastically only."""
+        self.materials = self._elastic if held else self._yielding
 
     def attach_rigid(self, rigid) -> None:
         """Let a rigid.RigidBodies move its members after G2P; they meet the ground as whole bodies."""

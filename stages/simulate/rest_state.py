@@ -31,7 +31,7 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .constitutive import lame_parameters
+from .constitutive import MIN_STRETCH, lame_parameters
 
 # A reconstruction's lowest points are a guess of a few percent of the object's height (the example
 # ball's closed back ends in a keel that needs 3.8 %, the cup 1.4 %): the ground may rise this far into
@@ -44,6 +44,13 @@ RELAXED = 1.0e-4
 SETTLE_PERIODS = 10.0
 # A photographed foot is not visibly squashed: its contact strain is at most this.
 CONTACT_STRAIN = 0.05
+# A contact's pressure peaks above its mean (at the rim of a flat foot; 1.5 times it at the centre of
+# a Hertzian one): a foot bearing its yield stress on average yields at the rim, leans, and its leaning
+# side yields more (the example cup as plasticine fell over so); on this share of it the cup stands.
+BEARING_YIELD_SHARE = 0.5
+# A body whose settled stress is past its yield stress in more than this share of its mass is named:
+# it will yield there in the run (a few particles at the rim of a contact patch do not show).
+OVERSTRESSED_SHARE = 0.01
 
 
 def _support(points_xz: np.ndarray, centre_xz: np.ndarray, spacing: float) -> tuple[bool, float]:
@@ -124,12 +131,13 @@ def support_height(positions: np.ndarray, masses: np.ndarray, object_id: np.ndar
 
 
 def bearing_stress(material) -> float:
-    """Contact pressure in Pa a deformable body's foot carries as photographed: below its yield stress,
-    and at most CONTACT_STRAIN of its Young's modulus (a softer foot is crushed, and a body on a
-    crushed foot tips over: the example ball as jelly on a 1.7 mm keel turned 29 degrees)."""
+    """Contact pressure in Pa a deformable body's foot carries as photographed: at most CONTACT_STRAIN
+    of its Young's modulus (a softer foot is crushed, and a body on a crushed foot tips over: the
+    example ball as jelly on a 1.7 mm keel turned 29 degrees) and BEARING_YIELD_SHARE of its yield
+    stress."""
     stress = CONTACT_STRAIN * material.youngs_modulus
     yield_stress = getattr(material, "yield_stress", None)
-    return min(stress, yield_stress) if yield_stress else stress
+    return min(stress, BEARING_YIELD_SHARE * yield_stress) if yield_stress else stress
 
 
 def turn_deg(rest: np.ndarray, now: np.ndarray, weights: np.ndarray) -> float:
@@ -145,6 +153,15 @@ def column_sag(material, height: float, gravity: float) -> float:
     """Static sag in m of the top of an elastic column of `height` m under its own weight (gravity in
     m/s^2): rho g h^2 / (2 E)."""
     return material.density * gravity * height ** 2 / (2.0 * material.youngs_modulus)
+
+
+def von_mises_stress(F: np.ndarray, material) -> np.ndarray:
+    """Von Mises equivalent stress in Pa of elastic deformation gradients F (N,3,3) under the Hencky law of
+    the yielding presets (constitutive.hencky_kirchhoff): sqrt(3/2) 2 mu |dev log(sigma)|, the quantity
+    their return mapping holds at or below the yield stress."""
+    eps = np.log(np.maximum(np.linalg.svd(F, compute_uv=False), MIN_STRETCH))
+    mu, _ = lame_parameters(material.youngs_modulus, material.poisson_ratio)
+    return math.sqrt(1.5) * 2.0 * mu * np.linalg.norm(eps - eps.mean(axis=1, keepdims=True), axis=1)
 
 
 def fundamental_period(material, height: float) -> float:

@@ -251,6 +251,7 @@ class Simulation:
         s.prescribed.assign(still.astype(np.int32))
         s.prescribed_velocity.zero_()
         dt = self._cfl_substep(0.0)  # even under a physics.dt: a dt that blows up is the run's to report
+        s.hold_yield(True)  # the photographed solid stands on its elastic stress; where that is past yield, the run yields
         relaxation = rest_state.Relaxation(self.masses)
         started, steps = time.perf_counter(), 0
         while steps * dt < rest_state.SETTLE_PERIODS * period:
@@ -258,8 +259,12 @@ class Simulation:
             steps += 1
             if relaxation.step(s):
                 break
+        s.hold_yield(False)
         settled = s.x.numpy().astype(np.float64)
         sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
+        settled_F = s.F.numpy().astype(np.float64)
+        for k in deformable:
+            self._warn_overstressed(k, rest_sim, settled_F)
         if relaxation.residual >= rest_state.RELAXED:
             for k, h in zip(deformable, heights):
                 self._warn_unsettled(k, h, rest_sim[self.object_id == k], settled[self.object_id == k], steps * dt)
@@ -271,6 +276,25 @@ class Simulation:
                  steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, elapsed)
         log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
                  self._substeps_at_rest * elapsed / steps, self._substeps_at_rest, 1e3 * elapsed / steps)
+
+    def _warn_overstressed(self, k: int, rest_sim: np.ndarray, settled_F: np.ndarray) -> None:
+        """Say so when more than OVERSTRESSED_SHARE of object k's mass stands past its yield stress."""
+        material = self.materials[k]
+        if not getattr(material, "yield_stress", None):  # metal, plasticine and foam yield by von Mises
+            return
+        sel = self.object_id == k
+        stress = rest_state.von_mises_stress(settled_F[sel], material)
+        over = stress > material.yield_stress
+        share = float(self.masses[sel][over].sum() / self.masses[sel].sum())
+        if share <= rest_state.OVERSTRESSED_SHARE:
+            return
+        heights = 1e3 * (rest_sim[sel, 1] - rest_sim[sel, 1].min())
+        log.warning("object %d (%s): standing under its own weight as photographed, %.1f %% of its mass is stressed "
+                    "past its yield_stress %.3g Pa (up to %.3g Pa, %.0f to %.0f mm above its lowest point), so it "
+                    "yields there in the run and may sag, lean or fall as a body of this material would. To keep "
+                    "its shape raise objects[%d].material.yield_stress above %.3g Pa, or make size_m smaller", k,
+                    material.preset, 100 * share, material.yield_stress, stress.max(), heights[over].min(),
+                    heights[over].max(), k, np.percentile(stress, 100 * (1 - rest_state.OVERSTRESSED_SHARE)))
 
     def _warn_unsettled(self, k: int, height: float, rest: np.ndarray, settled: np.ndarray, seconds: float) -> None:
         """Say that object k did not come to rest under its weight, how far it moved, and what holds it."""

@@ -227,3 +227,22 @@ def test_a_soft_ball_stands_on_a_foot_that_carries_its_weight():
         assert area / (2 * math.pi * R) <= sink < area / (2 * math.pi * R) + spacing  # the next lattice layer
         sinks.append(sink)
     assert sinks[1] < sinks[0]
+
+
+def test_the_settle_is_elastic_and_names_a_body_standing_past_its_yield(caplog):
+    """Under its own weight a 1 m plasticine column is stressed rho g (H - y) at height y (uniaxial: its
+    von Mises stress), past its 5 kPa yield stress below y = H - 5 kPa / (rho g), about half of its mass.
+    The settle finds that elastic stress without yielding (no plastic strain after it), and the warning
+    names the share past yield, within 0.1 of that analytic half."""
+    height = 1.0
+    points = box_surface(np.zeros(3), np.array([0.3 * height, height, 0.3 * height]), 0.05 * height)
+    material = M.Plasticine()
+    sim = Simulation(PhysicsConfig(duration_s=0.1, grid=16), [material], points + [0, 0, 2.0],
+                     np.zeros(len(points), int))
+    with caplog.at_level("WARNING", logger="physmotion.simulate"):
+        sim.settle()
+    assert np.all(sim.solver.history.numpy() == 0.0)
+    messages = [r.getMessage() for r in caplog.records if "past its yield_stress" in r.getMessage()]
+    assert len(messages) == 1
+    share = float(messages[0].split("own weight as photographed, ")[1].split(" %")[0]) / 100
+    assert share == pytest.approx(1.0 - material.yield_stress / (material.density * G * height), abs=0.1)
