@@ -10,19 +10,22 @@ break that if taken as they are:
   it stands: the convex hull of its points at or below the plane (seen from
   above) holds its centre of mass with a margin and, for a deformable body,
   the area those points cover carries its weight below its bearing stress
-  (`bearing_stress`: the yield stress, or 5 % of E), within MAX_SINK of its
-  height. The few points below the
+  (`bearing_stress`: half the yield stress, and at most 5 % of E), within
+  MAX_SINK of its height. The few points below the
   plane stay where they are, inside the ground (they are its contact patch);
   nothing is moved, so frame 0 is still the photograph.
 - Its shape is the loaded shape, but a simulation that starts from it with no
   stress lets it fall into its own weight: it sags by twice its static
   deflection, rings and, on a narrow support, rocks or rolls away. The
   settle (simulation.Simulation.settle, `Relaxation`) finds the stress of the
-  loaded state: the bodies sink under gravity by dynamic relaxation, and then
-  every particle goes back to its photographed place and rest, keeping its
-  elastic deformation gradient and material history. To first order in the
-  deflection that stress holds the photographed shape up against gravity, so
-  at t = 0 the bodies are at rest in the shape of the photograph.
+  loaded state: the bodies sink under gravity by dynamic relaxation, the
+  solids elastically (a photographed solid stands on its elastic stress;
+  where that is past its yield stress, `von_mises_stress`, it yields in the
+  run), and then every particle goes back to its photographed place and
+  rest, keeping its elastic deformation gradient and material history. To
+  first order in the deflection that stress holds the photographed shape up
+  against gravity, so at t = 0 the bodies are at rest in the shape of the
+  photograph.
 """
 from __future__ import annotations
 
