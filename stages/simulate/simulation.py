@@ -245,8 +245,10 @@ class Simulation:
         deformable = sorted(k for k in loaded if self.materials[k].preset != "rigid")
         if not deformable:
             return
-        heights = [float(np.ptp(rest_sim[self.object_id == k, 1])) for k in deformable]
-        period = max(rest_state.fundamental_period(self.materials[k], h) for k, h in zip(deformable, heights))
+        extents = [np.ptp(rest_sim[self.object_id == k], axis=0) for k in deformable]
+        heights = [float(e[1]) for e in extents]
+        period = max(rest_state.fundamental_period(self.materials[k], float(e[1]), float(min(e[0], e[2])))
+                     for k, e in zip(deformable, extents))
         still = held | ~np.isin(self.object_id, deformable)
         s.prescribed.assign(still.astype(np.int32))
         s.prescribed_velocity.zero_()
