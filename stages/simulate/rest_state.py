@@ -56,20 +56,26 @@ BEARING_YIELD_SHARE = 0.5
 OVERSTRESSED_SHARE = 0.01
 
 
+def support_margin(points_xz: np.ndarray, centre_xz: np.ndarray) -> float:
+    """How far (m) centre (2,) lies inside the convex hull of points (N,2), its support seen from above;
+    negative outside, -inf without an area to stand on."""
+    if len(points_xz) < 3:
+        return -math.inf
+    try:
+        hull = ConvexHull(points_xz)
+    except QhullError:  # all on one line: no area to stand on
+        return -math.inf
+    # equations: n . p + offset <= 0 inside, unit n
+    return float(-np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]))
+
+
 def _support(points_xz: np.ndarray, centre_xz: np.ndarray, spacing: float) -> tuple[bool, float]:
     """Whether the convex hull of points (N,2) holds centre (2,) at least one lattice `spacing` inside its
     edges, and the area (m^2) the points themselves cover: spacing^2 for each lattice column they occupy
     (a ring of contact bears the weight on the ring, not on the hull it encloses)."""
-    if len(points_xz) < 3:
-        return False, 0.0
-    try:
-        hull = ConvexHull(points_xz)
-    except QhullError:  # all on one line: no area to stand on
-        return False, 0.0
-    # equations: n . p + offset <= 0 inside, unit n
-    inside = np.max(hull.equations[:, :2] @ centre_xz + hull.equations[:, 2]) <= -spacing
+    inside = support_margin(points_xz, centre_xz) >= spacing
     columns = len(np.unique(np.floor(points_xz / spacing).astype(np.int64), axis=0))
-    return bool(inside), columns * spacing ** 2
+    return inside, columns * spacing ** 2
 
 
 def standing_height(positions: np.ndarray, masses: np.ndarray, spacing: float, bearing_area: float = 0.0) -> float:

@@ -83,7 +83,7 @@ class Simulation:
         means_sim = means @ self.Q.T
         dx = domain.fit_grid(means_sim, physics.grid, ground_y=means_sim[:, 1].min() if ground.enabled else None,
                              walls=physics.walls).dx
-        spacing = lattice_spacing(dx, physics.particles_per_cell)
+        self.spacing = spacing = lattice_spacing(dx, physics.particles_per_cell)
         fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette)
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
@@ -203,6 +203,28 @@ class Simulation:
             sunk = float(self.ground_y - rest_sim[:, 1].min())
             log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
                      1e3 * sunk)
+            self._warn_unsupported(rest_sim)
+
+    def _warn_unsupported(self, rest_sim: np.ndarray) -> None:
+        """Say which objects on the ground no support holds up: their centre of mass lies outside the hull
+        of their points at or below the ground plane (within rest_state.MAX_SINK), so they tip over at t = 0."""
+        for k in range(len(self.materials)):
+            sel = self.object_id == k
+            x, m = rest_sim[sel], self.masses[sel]
+            foot = x[:, 1] <= self.ground_y
+            if not foot.any():
+                continue  # in flight
+            margin = rest_state.support_margin(x[foot][:, [0, 2]], (m @ x / m.sum())[[0, 2]])
+            if margin >= self.spacing:
+                continue
+            where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge"
+                     % (1e3 * margin)) if math.isfinite(margin) else "over a line of contact, not an area"
+            log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its "
+                        "points at the ground, which may rise %.0f %% of its height into it) holds its centre of mass "
+                        "%s, so it tips over from t = 0 as that shape would, rigid too. If the photographed object "
+                        "stands, its reconstruction is too thin or leans where the photograph does not show it (a "
+                        "bike seen from the side): hold its foot with a `fixed` condition (physics.conditions) or "
+                        "add reconstruct.extra_views", k, 100 * rest_state.MAX_SINK, where)
 
     def _warn_crushed_by_weight(self, k: int, height: float) -> None:
         """Say so when object k's own weight presses its base beyond its yield stress (rho g H, a column's)."""

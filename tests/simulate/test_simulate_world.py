@@ -246,3 +246,16 @@ def test_the_settle_is_elastic_and_names_a_body_standing_past_its_yield(caplog):
     assert len(messages) == 1
     share = float(messages[0].split("own weight as photographed, ")[1].split(" %")[0]) / 100
     assert share == pytest.approx(1.0 - material.yield_stress / (material.density * G * height), abs=0.1)
+
+
+def test_a_body_no_support_holds_is_named_before_the_run(caplog):
+    """A box on one edge turned 8 degrees needs 7.1 mm of sink to hold its centre of mass, more than
+    rest_state.MAX_SINK allows: it is named as not standing (it falls over, test above); turned 5
+    degrees it stands and is not."""
+    for tilt, warned in ((8.0, True), (5.0, False)):
+        caplog.clear()
+        points = tilted_box((SIZE, SIZE, SIZE), tilt)
+        with caplog.at_level("WARNING", logger="physmotion.simulate"):
+            Simulation(PhysicsConfig(grid=20, fps=10, duration_s=0.1), [M.Jelly(youngs_modulus=5e4)], points,
+                       np.zeros(len(points), int))
+        assert any("does not stand as reconstructed" in r.getMessage() for r in caplog.records) == warned, tilt
