@@ -48,8 +48,8 @@ SETTLE_PERIODS = 10.0
 # A photographed foot is not visibly squashed: its contact strain is at most this.
 CONTACT_STRAIN = 0.05
 # A contact's pressure peaks above its mean (at the rim of a flat foot; 1.5 times it at the centre of
-# a Hertzian one): a foot bearing its yield stress on average yields at the rim, leans, and its leaning
-# side yields more (the example cup as plasticine fell over so); on this share of it the cup stands.
+# a Hertzian one): a foot bearing its yield stress on average yields where the pressure peaks and the
+# body leans (the example cup as plasticine fell over so, 55 degrees); on this share of it the cup stands.
 BEARING_YIELD_SHARE = 0.5
 # A body whose settled stress is past its yield stress in more than this share of its mass is named:
 # it will yield there in the run (a few particles at the rim of a contact patch do not show).
