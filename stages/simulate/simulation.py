@@ -190,41 +190,41 @@ class Simulation:
 
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
         """Each object's mass, volume and principal moments of inertia about its centre of mass."""
+        if self.ground_y is not None:
+            sunk = float(self.ground_y - rest_sim[:, 1].min())
+            log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
+                     1e3 * sunk)
         for k, material in enumerate(self.materials):
             sel = self.object_id == k
             m, x = self.masses[sel], rest_sim[sel]
-            r = x - m @ x / m.sum()
+            centre = m @ x / m.sum()
+            r = x - centre
             inertia = np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r)
             moments = np.linalg.eigvalsh(inertia)
             log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
                      material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
             self._warn_crushed_by_weight(k, float(np.ptp(x[:, 1])))
-        if self.ground_y is not None:
-            sunk = float(self.ground_y - rest_sim[:, 1].min())
-            log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
-                     1e3 * sunk)
-            self._warn_unsupported(rest_sim)
+            if self.ground_y is not None:
+                self._warn_unsupported(k, x, centre)
 
-    def _warn_unsupported(self, rest_sim: np.ndarray) -> None:
-        """Say which objects on the ground no support holds up: their centre of mass lies outside the hull
-        of their points at or below the ground plane (within rest_state.MAX_SINK), so they tip over at t = 0."""
-        for k in range(len(self.materials)):
-            sel = self.object_id == k
-            x, m = rest_sim[sel], self.masses[sel]
-            foot = x[:, 1] <= self.ground_y
-            if not foot.any():
-                continue  # in flight
-            margin = rest_state.support_margin(x[foot][:, [0, 2]], (m @ x / m.sum())[[0, 2]])
-            if margin >= self.spacing:
-                continue
-            where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge"
-                     % (1e3 * margin)) if math.isfinite(margin) else "over a line of contact, not an area"
-            log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its "
-                        "points at the ground, which may rise %.0f %% of its height into it) holds its centre of mass "
-                        "%s, so it tips over from t = 0 as that shape would, rigid too. If the photographed object "
-                        "stands, its reconstruction is too thin or leans where the photograph does not show it (a "
-                        "bike seen from the side): hold its foot with a `fixed` condition (physics.conditions) or "
-                        "add reconstruct.extra_views", k, 100 * rest_state.MAX_SINK, where)
+    def _warn_unsupported(self, k: int, x: np.ndarray, centre: np.ndarray) -> None:
+        """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame)
+        up: its centre of mass lies outside the hull of its points at or below the ground plane (within
+        rest_state.MAX_SINK), so it tips over at t = 0."""
+        foot = x[:, 1] <= self.ground_y
+        if not foot.any():
+            return  # in flight
+        margin = rest_state.support_margin(x[foot][:, [0, 2]], centre[[0, 2]])
+        if margin >= self.spacing:
+            return
+        where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge"
+                 % (1e3 * margin)) if math.isfinite(margin) else "over a line of contact, not an area"
+        log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its "
+                    "points at the ground, which may rise %.0f %% of its height into it) holds its centre of mass "
+                    "%s, so it tips over from t = 0 as that shape would, rigid too. If the photographed object "
+                    "stands, its reconstruction is too thin or leans where the photograph does not show it (a "
+                    "bike seen from the side): hold its foot with a `fixed` condition (physics.conditions) or "
+                    "add reconstruct.extra_views", k, 100 * rest_state.MAX_SINK, where)
 
     def _warn_crushed_by_weight(self, k: int, height: float) -> None:
         """Say so when object k's own weight presses its base beyond its yield stress (rho g H, a column's)."""
