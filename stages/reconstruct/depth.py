@@ -21,6 +21,9 @@ from .local_model import load_local_model
 
 EDGE_OFFSET_PX = 0.3
 """Mean distance (pixels) from the silhouette edge to the nearest outside pixel centre."""
+TIP_WINDOW_PX = 3.0
+"""An end of a silhouette is located from its edge this far back from its farthest point: rows enough
+for a round end of 10 px radius (about 30 edge points), little of a flat end's sides."""
 
 
 def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
@@ -30,32 +33,43 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     lies R from the silhouette, gets sqrt(R^2 - (R - d)^2): exact for a sphere
     (R its radius) and for a cylinder seen side-on (R its radius).
     """
-    padded = np.pad(mask.astype(bool), 1)  # objects cut by the image border close at the border
-    dist, nearest = ndimage.distance_transform_edt(padded, return_indices=True)
+    padded = np.pad(mask.astype(bool), 2)  # objects cut by the image border close at the border
     # To the silhouette edge: it lies between the last inside and the first outside pixel centre, on
     # average 0.5 px before the latter on straight axis-aligned edges and 0.2-0.35 px on curved ones
     # (measured on ray-cast discs); 0.3 balances the two.
-    dist = np.where(padded, dist - EDGE_OFFSET_PX, 0.0)
-    rows, cols = np.indices(padded.shape)
-    to_edge = np.stack([nearest[0] - rows, nearest[1] - cols]).astype(np.float64)
-    to_edge /= np.maximum(np.linalg.norm(to_edge, axis=0), 1e-9)
-    # Medial axis: where neighbours' directions to their nearest silhouette point turn by more than 90 degrees.
+    dist = np.where(padded, ndimage.distance_transform_edt(padded) - EDGE_OFFSET_PX, 0.0)
+    # Away from the edge: up the signed distance's gradient. (The direction from the nearest outside
+    # pixel breaks its ties on a pixelated rim so that neighbours at a one-pixel nub face opposite
+    # ways: spurs of the axis, that gave the pixels near them a radius of about one pixel; 11 ray-cast
+    # discs in 300 lost up to 80 % of their volume so.)
+    gradient = np.stack(np.gradient(dist - ndimage.distance_transform_edt(~padded)))
+    slope = np.linalg.norm(gradient, axis=0)
+    inward = gradient / np.maximum(slope, 1e-9)
+
+    def at(array: np.ndarray, dr: int, dc: int) -> np.ndarray:
+        """``array`` at each mask pixel's neighbour (dr, dc), |dr|, |dc| <= 1."""
+        rows, cols = array.shape[-2:]
+        return array[..., 2 + dr:rows - 2 + dr, 2 + dc:cols - 2 + dc]
+
+    def turned(a: tuple[int, int], b: tuple[int, int]) -> np.ndarray:
+        """Both neighbours a and b inside, their inward directions more than 90 degrees apart."""
+        return at(padded, *a) & at(padded, *b) & ((at(inward, *a) * at(inward, *b)).sum(0) < 0)
+
+    # Medial axis: where the inward direction turns by more than 90 degrees from a pixel to a neighbour
+    # (a pair straddling the axis) or across a pixel (the axis through its centre, where it vanishes).
     axis = np.zeros_like(padded)
-    for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        here = (slice(1, -1), slice(1, -1))
-        there = (slice(1 + dr, padded.shape[0] - 1 + dr), slice(1 + dc, padded.shape[1] - 1 + dc))
-        turned = (to_edge[(slice(None),) + here] * to_edge[(slice(None),) + there]).sum(0) < 0
-        turned &= padded[here] & padded[there]
-        axis[here] |= turned
-        axis[there] |= turned
+    neighbours = [(dr, dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr, dc) != (0, 0)]
+    at(axis, 0, 0)[...] = np.any([turned((0, 0), n) | turned((-n[0], -n[1]), n) for n in neighbours], axis=0)
     if not axis.any():  # a one-pixel-wide mask
         axis = padded.copy()
     _, axis_index = ndimage.distance_transform_edt(~axis, return_indices=True)
-    # Flagged pixels come in pairs straddling the true axis, each about half a pixel from it.
-    radius = dist[axis_index[0], axis_index[1]] + 0.5
+    # An axis pixel o < 1 px off the axis lies o nearer the edge than the axis, and its distance's slope
+    # (central differences across the ridge) is o.
+    at_axis = (axis_index[0], axis_index[1])
+    radius = dist[at_axis] + np.minimum(slope[at_axis], 1.0)
     d = np.minimum(dist, radius)
     half = np.sqrt(np.maximum(radius ** 2 - (radius - d) ** 2, 0.0))
-    return np.where(padded, half, 0.0)[1:-1, 1:-1]
+    return at(np.where(padded, half, 0.0), 0, 0)
 
 
 @dataclass
@@ -99,14 +113,44 @@ def unit_distance_shape(mask: np.ndarray, focal: float,
     return ObjectDepth(np.where(mask, front, np.nan), np.where(mask, back, np.nan))
 
 
+def edge_points(mask: np.ndarray) -> np.ndarray:
+    """(N,2) row, column (pixel-centre units) of the silhouette's edge: midway between every inside pixel
+    and each of its outside 4-neighbours (the edge lies between them, in no known place: the midpoint is
+    off by at most half a pixel and, over a curved edge, by nothing on average)."""
+    padded = np.pad(mask.astype(bool), 1)
+    rows, cols = np.nonzero(padded[:-1] != padded[1:])
+    across_rows = np.stack([rows + 0.5, cols], axis=1)
+    rows, cols = np.nonzero(padded[:, :-1] != padded[:, 1:])
+    across_cols = np.stack([rows, cols + 0.5], axis=1)
+    return np.concatenate([across_rows, across_cols]) - 1.0
+
+
+def tip_px(along: np.ndarray, across: np.ndarray) -> float:
+    """Where an edge ends along a direction: the top of a parabola along(across) fitted to the edge points
+    within TIP_WINDOW_PX of the farthest one (a round end's edge, sampled by dozens of points), at most the
+    fit's value at the window's sides (a flat end's corners)."""
+    near = along > along.max() - TIP_WINDOW_PX
+    a, b = along[near], across[near]
+    if np.unique(b).size < 3:
+        return float(a.max())
+    coefficients = np.polyfit(b, a, 2)
+    candidates = [b.min(), b.max()]
+    vertex = -coefficients[1] / (2 * coefficients[0]) if coefficients[0] < 0 else np.nan
+    if b.min() < vertex < b.max():
+        candidates.append(vertex)
+    return float(np.polyval(coefficients, candidates).max())
+
+
 def largest_extent_px(mask: np.ndarray) -> float:
-    """Largest extent (pixels) of a silhouette: the longest side of its box aligned with the principal
-    axes of its pixels, so that a tilted object measures its own length, not an axis-aligned box's width."""
+    """Largest extent (pixels) of a silhouette: its length along the longer of the principal axes of its
+    pixels (a tilted object measures its own length, not an axis-aligned box's width), between the ends
+    of its edge located to a fraction of a pixel (tip_px). Counted in whole pixels it was up to a
+    pixel long or short: 7 % of a 14 px disc, 2 % of a 54 px one, three times that in volume."""
     points = np.argwhere(mask).astype(np.float64)
-    points -= points.mean(0)
-    _, axes = np.linalg.eigh(points.T @ points)
-    along = points @ axes
-    return float((along.max(0) - along.min(0)).max()) + 1.0  # pixel centres to pixel edges
+    centre = points.mean(0)
+    _, axes = np.linalg.eigh((points - centre).T @ (points - centre))
+    edge = (edge_points(mask) - centre) @ axes
+    return max(tip_px(edge[:, k], edge[:, 1 - k]) + tip_px(-edge[:, k], edge[:, 1 - k]) for k in range(2))
 
 
 def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float],

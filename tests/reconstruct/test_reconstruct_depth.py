@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from stages.reconstruct.depth import depth_prior_image, inflation_half_thickness, object_depths
+from stages.reconstruct.depth import depth_prior_image, inflation_half_thickness, largest_extent_px, object_depths
 from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
 
 
@@ -21,6 +21,47 @@ def test_inflation_of_a_disc_is_a_hemisphere():
     inner = r < radius - 3  # away from the pixelated rim
     assert np.median(np.abs(half[inner] - sphere[inner])) < 1.5
     assert half[~mask].max() == 0
+
+
+def test_inflation_of_any_disc_is_a_hemisphere_at_every_pixel():
+    """300 discs of radius 3-60 px at sub-pixel centres: every pixel 2 px inside the rim within 3 px of the
+    hemisphere, and the volume (sum of 2 h) within 5 % of the ball's from 8 px up. Before the inward
+    direction came from the distance's gradient, 11 in 300 had a spur of the axis at a one-pixel nub of
+    the rim and lost up to 80 % of their thickness on one side."""
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        radius = rng.uniform(3, 60)
+        centre = rng.uniform(64, 65, 2)
+        mask = disc(130, 130, centre, radius)
+        rows, cols = np.mgrid[:130, :130] + 0.5
+        r = np.hypot(cols - centre[0], rows - centre[1])
+        sphere = np.sqrt(np.maximum(radius ** 2 - r ** 2, 0))
+        half = inflation_half_thickness(mask)
+        inner = r < radius - 2
+        assert np.abs(half - sphere)[inner].max() < 3, radius
+        if radius >= 8:
+            assert 2 * half.sum() == pytest.approx(4 / 3 * np.pi * radius ** 3, rel=0.05), radius
+
+
+def test_largest_extent_is_measured_to_a_fraction_of_a_pixel():
+    """Discs of radius 12-60 px and capsules turned at any angle, at sub-pixel centres: the extent within
+    1.5 % of the diameter or length, 0.6 % rms (counted in whole pixels: up to 3.8 % and 1.3 % rms on
+    these discs, which is three times that in the distance's cube, the body's volume)."""
+    rng = np.random.default_rng(1)
+    rows, cols = np.mgrid[:160, :160] + 0.5
+    errors = []
+    for _ in range(150):
+        centre = rng.uniform(79, 81, 2)
+        radius = rng.uniform(12, 60)
+        errors.append(largest_extent_px(disc(160, 160, centre, radius)) / (2 * radius) - 1)
+        half_length, cap, turn = rng.uniform(10, 45), rng.uniform(6, 20), rng.uniform(0, np.pi)
+        u = (cols - centre[0]) * np.cos(turn) + (rows - centre[1]) * np.sin(turn)
+        v = (rows - centre[1]) * np.cos(turn) - (cols - centre[0]) * np.sin(turn)
+        capsule = np.hypot(u - np.clip(u, -half_length, half_length), v) < cap
+        errors.append(largest_extent_px(capsule) / (2 * (half_length + cap)) - 1)
+    errors = np.array(errors)
+    assert np.abs(errors).max() < 0.015
+    assert np.sqrt(np.mean(errors ** 2)) < 0.006
 
 
 def test_inflation_of_a_bar_has_round_cross_sections_of_its_own_width():
