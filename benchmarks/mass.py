@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import sys
 import tempfile
 from pathlib import Path
@@ -31,22 +30,6 @@ from stages.simulate.simulation import Simulation  # noqa: E402
 RHO = 1000.0
 
 
-def capsule_reference(shape: Capsule) -> tuple[float, np.ndarray]:
-    """(volume m^3, sorted principal moments kg m^2) of a solid capsule of density RHO."""
-    r, L = shape.radius, 2 * float(np.linalg.norm(shape.half_axis))
-    cylinder, cap = RHO * math.pi * r * r * L, RHO * 2 / 3 * math.pi * r ** 3
-    axial = cylinder * r * r / 2 + 2 * cap * 2 / 5 * r * r
-    across = cylinder * (L * L / 12 + r * r / 4) + 2 * cap * (2 / 5 * r * r + L * L / 4 + 3 * L * r / 8)
-    return math.pi * r * r * L + 4 / 3 * math.pi * r ** 3, np.sort([axial, across, across])
-
-
-def box_reference(shape: Box) -> tuple[float, np.ndarray]:
-    h = shape.half
-    volume = 8 * float(np.prod(h))
-    m = RHO * volume
-    return volume, np.sort([m / 3 * (h[1] ** 2 + h[2] ** 2), m / 3 * (h[0] ** 2 + h[2] ** 2), m / 3 * (h[0] ** 2 + h[1] ** 2)])
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--sizes", nargs="+", type=int, default=[96, 128, 192])
@@ -58,7 +41,7 @@ def main() -> None:
     print("| shape | photo px | particles | volume / analytic | principal moments / analytic |")
     print("| --- | --- | --- | --- | --- |")
     for name, shape in shapes.items():
-        volume, moments = box_reference(shape) if isinstance(shape, Box) else capsule_reference(shape)
+        volume, moments = shape.volume, shape.principal_moments(RHO)
         for width in args.sizes:
             with tempfile.TemporaryDirectory() as tmp:
                 scene = write_scene(Path(tmp), shape, width=width, height=width * 3 // 4, iterations=args.iterations)

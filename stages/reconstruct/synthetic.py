@@ -39,6 +39,21 @@ class Capsule:
         """Largest extent: the overall length."""
         return 2 * (float(np.linalg.norm(self.half_axis)) + self.radius)
 
+    @property
+    def volume(self) -> float:
+        """m^3: the cylinder and the two hemispheres."""
+        r, length = self.radius, 2 * float(np.linalg.norm(self.half_axis))
+        return math.pi * r * r * length + 4 / 3 * math.pi * r ** 3
+
+    def principal_moments(self, density: float) -> np.ndarray:
+        """Sorted principal moments of inertia (3,) kg m^2 of the solid capsule about its centre."""
+        r, length = self.radius, 2 * float(np.linalg.norm(self.half_axis))
+        cylinder, cap = density * math.pi * r * r * length, density * 2 / 3 * math.pi * r ** 3
+        axial = cylinder * r * r / 2 + 2 * cap * 2 / 5 * r * r
+        # each hemisphere about its own centre of mass (3/8 r from its flat face), moved to the capsule's
+        across = cylinder * (length ** 2 / 12 + r * r / 4) + 2 * cap * (2 / 5 * r * r + length ** 2 / 4 + 3 * length * r / 8)
+        return np.sort([axial, across, across])
+
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (...,) in metres of points (...,3): negative inside."""
         rel = points - self.centre
@@ -66,6 +81,16 @@ class Box:
     def size_m(self) -> float:
         """Largest extent: the longest side."""
         return 2 * float(np.max(self.half))
+
+    @property
+    def volume(self) -> float:
+        """m^3."""
+        return 8 * float(np.prod(self.half))
+
+    def principal_moments(self, density: float) -> np.ndarray:
+        """Sorted principal moments of inertia (3,) kg m^2 of the solid box about its centre."""
+        h, m = self.half, density * self.volume
+        return np.sort([m / 3 * (h[1] ** 2 + h[2] ** 2), m / 3 * (h[0] ** 2 + h[2] ** 2), m / 3 * (h[0] ** 2 + h[1] ** 2)])
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (...,) in metres of points (...,3): negative inside."""
