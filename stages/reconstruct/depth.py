@@ -91,51 +91,26 @@ class ObjectDepth:
         return self.front / ray_z
 
 
-def along_rays(half: np.ndarray, K: np.ndarray, side: float, steps: int = 24) -> np.ndarray:
-    """Where each pixel's ray meets one side of the inflated body, z (H,W) at unit distance, NaN off it.
-
-    The body is the inflation seen orthographically from its centre plane (z = 1): at centre-plane
-    pixel q it spans z = 1 -/+ half(q) / f. The ray through pixel u is at q = c + (u - c) z at depth z,
-    so nearer than the centre plane it sees a point of the body nearer the axis: the ray meets the side
-    ``side`` (-1 the front, +1 the back) where side (z - 1) f = half(q(z)), found by bisection. (Taking
-    z = 1 -/+ half(u) / f instead puts the front and the back on the rays at the centre plane's
-    scale: a 12 cm ball 0.6 m away came out 12 % short in volume.)
-    """
-    focal, centre = K[1, 1], K[:2, 2]
-    rows, cols = np.nonzero(half > 0)
-    pixel = np.stack([cols + 0.5, rows + 0.5], axis=1)
-    near, far = np.ones(len(rows)), np.full(len(rows), 1.0 + side * half.max() / focal)
-    for _ in range(steps):  # the root lies between `near` (the centre plane) and `far` (the thickest point's side)
-        z = 0.5 * (near + far)
-        q = centre + (pixel - centre) * z[:, None] - 0.5
-        inside = side * (z - 1.0) * focal < ndimage.map_coordinates(half, [q[:, 1], q[:, 0]], order=1, cval=0.0)
-        near, far = np.where(inside, z, near), np.where(inside, far, z)
-    out = np.full(half.shape, np.nan)
-    out[rows, cols] = 0.5 * (near + far)
-    return out
-
-
-def unit_distance_shape(mask: np.ndarray, K: np.ndarray,
+def unit_distance_shape(mask: np.ndarray, focal: float,
                         front_inverse_depth: Optional[np.ndarray] = None) -> ObjectDepth:
     """Front and back z at unit distance of the silhouette's centre plane.
 
-    Inflation: where the rays meet the inflated body (along_rays). With ``front_inverse_depth`` (a
-    relative inverse depth such as MiDaS gives, any scale and shift) the front is that map aligned to
-    the inflation front by least squares in inverse depth (as MiDaS is evaluated); the back stays the
-    front plus the inflation thickness.
+    Inflation: z = 1 -/+ h / focal. With ``front_inverse_depth`` (a relative
+    inverse depth such as MiDaS gives, any scale and shift) the front is that
+    map aligned to the inflation front by least squares in inverse depth (as
+    MiDaS is evaluated); the back stays the front plus the inflation thickness.
     """
-    half = inflation_half_thickness(mask)
-    front, back = along_rays(half, K, -1.0), along_rays(half, K, 1.0)
-    thickness = back - front
+    half = inflation_half_thickness(mask) / focal
+    front, back = 1.0 - half, 1.0 + half
     if front_inverse_depth is not None:
         target = 1.0 / front[mask]
         design = np.stack([front_inverse_depth[mask], np.ones(mask.sum())], axis=1)
         (scale, shift), *_ = np.linalg.lstsq(design, target, rcond=None)
         aligned = scale * front_inverse_depth + shift
-        floor = 1.0 / (1.0 + 2 * half.max() / K[1, 1] + 1.0 / K[1, 1])  # never behind the inflation's back
+        floor = 1.0 / (1.0 + 2 * half.max() + 1.0 / focal)  # never behind the inflation's back
         front = np.where(mask, 1.0 / np.maximum(aligned, floor), np.nan)
-        back = front + thickness
-    return ObjectDepth(front, back)
+        back = front + 2 * half
+    return ObjectDepth(np.where(mask, front, np.nan), np.where(mask, back, np.nan))
 
 
 def edge_points(mask: np.ndarray) -> np.ndarray:
@@ -192,7 +167,7 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float],
     for k, size in enumerate(sizes_m):
         mask = labels == k + 1
         focal = K[1, 1]
-        shape = unit_distance_shape(mask, K, inverse_depth)
+        shape = unit_distance_shape(mask, focal, inverse_depth)
         extent_px = max(largest_extent_px(mask), 2 * inflation_half_thickness(mask).max())
         distance = size * focal / extent_px
         out.append(ObjectDepth(shape.front * distance, shape.back * distance))

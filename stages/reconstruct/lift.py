@@ -78,16 +78,16 @@ def _surfels(points: np.ndarray, pixels: np.ndarray, stride: int, colors: np.nda
                      np.full(count, object_id))
 
 
-def _rim_wall(front: np.ndarray, rays: np.ndarray, thickness: np.ndarray, pixels: np.ndarray, spacing: np.ndarray,
+def _rim_wall(front: np.ndarray, thickness: np.ndarray, pixels: np.ndarray, spacing: np.ndarray,
               colors: np.ndarray, object_id: int) -> Gaussians:
-    """Isotropic Gaussians from the front surface (H,W,3) back along the pixels' rays (H,W,3, unit z) by
-    ``thickness`` (H,W) in z, behind the silhouette's edge pixels, one spacing apart."""
+    """Isotropic Gaussians from the front surface (H,W,3) straight back along the optical axis by
+    ``thickness`` (H,W), behind the silhouette's edge pixels, one spacing apart."""
     edge = pixels & ~ndimage.binary_erosion(pixels, border_value=0)
     rows, cols = np.nonzero(edge)
     counts = np.maximum(1, np.ceil(thickness[edge] / spacing[edge]).astype(int) - 1)
     steps = np.concatenate([(np.arange(1, c + 1) / (c + 1)) for c in counts])
     idx = np.repeat(np.arange(len(rows)), counts)
-    means = front[rows[idx], cols[idx]] + (steps * thickness[rows[idx], cols[idx]])[:, None] * rays[rows[idx], cols[idx]]
+    means = front[rows[idx], cols[idx]] + np.outer(steps * thickness[rows[idx], cols[idx]], [0.0, 0.0, 1.0])
     sigma = SIGMA_PER_SPACING * spacing[rows[idx], cols[idx]]
     count = len(means)
     return Gaussians(means, np.repeat(sigma[:, None], 3, axis=1), np.tile([1.0, 0, 0, 0], (count, 1)),
@@ -98,10 +98,12 @@ def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id:
                 front_stride: int = 1, back_stride: int = 2) -> Gaussians:
     """Closed surface of Gaussians of one object.
 
-    The back lies where each pixel's ray leaves the object (depth.along_rays): the front and the
-    back are both on the inflated body, which is mirror-symmetric about its centre plane. (Closed
-    straight behind the front along the optical axis, the back took the front's scale, nearer the
-    axis than the rays reach: a 12 cm ball 0.6 m away came out 12 % short in volume.)
+    The back lies straight behind the front along the optical axis, not where each pixel's
+    ray leaves the object: the object is then mirror-symmetric about its mid-depth plane.
+    Measured: on the coffee scene (camera pitched 35 degrees) the cup closed along the rays
+    moved 17-20 mm (median over its particles) under gravity alone in its first half second,
+    closed straight behind 5-7 mm; the synthetic capsule's side IoU is 0.81 this way, 0.84
+    along the rays.
 
     Args:
         depth: camera-space front/back z (H,W) of the object at the lifting resolution, NaN off it.
@@ -116,12 +118,12 @@ def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id:
     pixels = depth.pixels
     front = rays * _filled(depth.front)[..., None]
     thickness = _filled(depth.back) - _filled(depth.front)
-    back = rays * _filled(depth.back)[..., None]
+    back = front + thickness[..., None] * np.array([0.0, 0.0, 1.0])
     parts = []
     for points, stride in ((front, front_stride), (back, back_stride)):
         grid = np.zeros_like(pixels)
         grid[stride // 2::stride, stride // 2::stride] = True
         parts.append(_surfels(points, pixels & grid, stride, colors, object_id))
     wall_spacing = back_stride * depth.front / K[0, 0]  # metres per pixel at the front surface, times the stride
-    parts.append(_rim_wall(front, rays, thickness, pixels, wall_spacing, colors, object_id))
+    parts.append(_rim_wall(front, thickness, pixels, wall_spacing, colors, object_id))
     return Gaussians.concatenate(parts)

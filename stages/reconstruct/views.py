@@ -105,6 +105,6 @@ def extra_view(path: Path, azimuth_deg: float, field: str, initial: Gaussians, f
         raise InputError(path, field, f"the initial Gaussians are not visible from azimuth {azimuth_deg} degrees",
                          "check azimuth_deg (degrees, positive towards the photograph's right)")
     mask = _fit_mask(mask, alpha > 0.5)
-    shape = unit_distance_shape(mask, K)
+    shape = unit_distance_shape(mask, K[1, 1])
     prior = np.nan_to_num(shape.along_ray(K))
     return View(camera, as_tensor(prior), torch.tensor(_valid(mask), device=device))

@@ -10,7 +10,6 @@ from schemas.artifacts import GaussiansArtifact, read_artifact
 from stages.reconstruct.cli import main
 from stages.reconstruct.synthetic import Capsule, write_scene
 from stages.reconstruct.depth import DptDepth, unit_distance_shape
-from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.segment import SamSegmenter
 
 
@@ -54,9 +53,8 @@ def test_dpt_backend_gives_a_photo_sized_map_that_aligns_to_the_inflation(tiny_d
     mask[8:32, 10:46] = True
     # Alignment in inverse depth: a map that is an affine function of the inflation's own inverse depth
     # must come back as the inflation's front exactly.
-    K = intrinsics_from_fov(40, 56, 40)
-    reference = unit_distance_shape(mask, K)
-    aligned = unit_distance_shape(mask, K, np.where(mask, 3.0 / reference.front - 1.0, 0.0))
+    reference = unit_distance_shape(mask, 50.0)
+    aligned = unit_distance_shape(mask, 50.0, np.where(mask, 3.0 / reference.front - 1.0, 0.0))
     assert np.allclose(aligned.front[mask], reference.front[mask], rtol=1e-6)
 
 
