@@ -41,7 +41,7 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     # Away from the edge: up the signed distance's gradient. (The direction from the nearest outside
     # pixel breaks its ties on a pixelated rim so that neighbours at a one-pixel nub face opposite
     # ways: spurs of the axis, that gave the pixels near them a radius of about one pixel; 11 ray-cast
-    # discs in 300 lost up to 80 % of their volume so.)
+    # discs in 300 lost most of their thickness on one side so.)
     gradient = np.stack(np.gradient(dist - ndimage.distance_transform_edt(~padded)))
     slope = np.linalg.norm(gradient, axis=0)
     inward = gradient / np.maximum(slope, 1e-9)
