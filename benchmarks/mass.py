@@ -25,7 +25,7 @@ from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.reconstruct.cli import main as reconstruct  # noqa: E402
 from stages.reconstruct.synthetic import Box, Capsule, write_scene  # noqa: E402
-from stages.simulate.simulation import Simulation  # noqa: E402
+from stages.simulate.simulation import Simulation, mass_properties  # noqa: E402
 
 RHO = 1000.0
 
@@ -49,11 +49,9 @@ def main() -> None:
                 g = read_artifact(f"{tmp}/g.h5", GaussiansArtifact)
             sim = Simulation(PhysicsConfig(duration_s=0.01, grid=48), [M.Rigid(density=RHO)], g.means, g.object_id,
                              silhouette=(g.mask, g.K))
-            m, x = sim.masses, sim.rest_world
-            r = x - m @ x / m.sum()
-            inertia = np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r)
-            ratios = np.linalg.eigvalsh(inertia) / moments
-            print(f"| {name} | {width} x {width * 3 // 4} | {len(m)} | {sim.volumes.sum() / volume:.3f} | "
+            _, moments_sim = mass_properties(sim.masses, sim.rest_world)
+            ratios = moments_sim / moments
+            print(f"| {name} | {width} x {width * 3 // 4} | {len(sim.masses)} | {sim.volumes.sum() / volume:.3f} | "
                   f"{', '.join(f'{q:.3f}' for q in ratios)} |", flush=True)
 
 

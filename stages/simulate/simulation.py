@@ -40,6 +40,15 @@ BLOW_UP_FACTOR = 10.0
 FOLLOW_MARGIN_CELLS = 2
 
 
+def mass_properties(masses: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre of mass (3,) m, sorted principal moments of inertia about it (3,) kg m^2) of point masses
+    (P,) kg at points (P,3) m."""
+    centre = masses @ points / masses.sum()
+    r = points - centre
+    inertia = np.eye(3) * np.sum(masses * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", masses, r, r)
+    return centre, np.linalg.eigvalsh(inertia)
+
+
 class Simulation:
     """One scene's simulation.
 
@@ -197,10 +206,7 @@ class Simulation:
         for k, material in enumerate(self.materials):
             sel = self.object_id == k
             m, x = self.masses[sel], rest_sim[sel]
-            centre = m @ x / m.sum()
-            r = x - centre
-            inertia = np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r)
-            moments = np.linalg.eigvalsh(inertia)
+            centre, moments = mass_properties(m, x)
             log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
                      material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
             self._warn_crushed_by_weight(k, float(np.ptp(x[:, 1])))

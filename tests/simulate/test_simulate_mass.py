@@ -7,7 +7,6 @@ inertia": the back closed straight behind the front takes the front's scale acro
 """
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
@@ -17,7 +16,7 @@ from schemas.scene import PhysicsConfig
 from stages.reconstruct.cli import main as reconstruct
 from stages.reconstruct.depth import inflation_half_thickness, largest_extent_px
 from stages.reconstruct.synthetic import Box, Capsule, write_scene
-from stages.simulate.simulation import Simulation
+from stages.simulate.simulation import Simulation, mass_properties
 
 DENSITY = 1000.0  # the presets' default
 
@@ -34,9 +33,7 @@ def reconstructed_solid(shape, folder, width=128):
 
 def principal_moments(sim) -> np.ndarray:
     """Sorted principal moments of inertia (3,) of the simulated solid about its centre of mass, kg m^2."""
-    m, x = sim.masses, sim.rest_world
-    r = x - m @ x / m.sum()
-    return np.linalg.eigvalsh(np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r))
+    return mass_properties(sim.masses, sim.rest_world)[1]
 
 
 @pytest.mark.parametrize("width", [96, 128])
