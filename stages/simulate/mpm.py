@@ -4,8 +4,10 @@ All quantities live in the *simulation frame*: metres, with gravity along -y
 (see domain.py), so the ground is the grid plane y = ground_node * dx.
 
 One substep, one kernel per physical step:
-  particle_to_grid   scatter mass and APIC momentum plus stress and external forces
-  grid_update        momentum -> velocity, gravity, ground and wall conditions
+  crack fields       (crack_fields.py, scenes that can tear) each node's crack direction
+  particle_to_grid   scatter mass and APIC momentum plus stress and external forces,
+                     each side of a crack into its own field
+  grid_update        momentum -> velocity, gravity, contact across cracks, ground and walls
   grid_to_particle   gather velocity and its gradient C, advect, F <- (I + dt C) F;
                      particles off the grid fly freely (ballistic, ground contact only)
   rigid projection   (rigid.py) rigid objects follow one rigid motion
@@ -37,6 +39,8 @@ import numpy as np
 import warp as wp
 
 from .constitutive import initial_history, params_array, update_stress
+from .crack_fields import CrackFields, breaks, crack_contact, crack_field
+from .stencil import quadratic_weights, stencil_base
 
 # Nodes this close to a domain face form the wall layer; particles are kept
 # this far inside, so a quadratic stencil never leaves the grid.
@@ -64,24 +68,6 @@ class Ground:
     height: float | None = None  # None: node plane BOUNDARY_NODES of the grid the solver starts on
 
 
-@wp.func
-def stencil_base(x: wp.vec3, origin: wp.vec3, inv_dx: float, shape: wp.vec3i):
-    """Lower corner node of the 3x3x3 quadratic stencil of x, clamped onto the grid, and x in cell units."""
-    xg = (x - origin) * inv_dx
-    base = wp.vec3i(
-        wp.clamp(int(wp.floor(xg[0] - 0.5)), 0, shape[0] - 3),
-        wp.clamp(int(wp.floor(xg[1] - 0.5)), 0, shape[1] - 3),
-        wp.clamp(int(wp.floor(xg[2] - 0.5)), 0, shape[2] - 3),
-    )
-    return base, xg - wp.vec3(float(base[0]), float(base[1]), float(base[2]))
-
-
-@wp.func
-def quadratic_weights(fx: float):
-    """Quadratic B-spline weights of the three nodes at distances fx, fx - 1, fx - 2 (cells)."""
-    return wp.vec3(0.5 * (1.5 - fx) * (1.5 - fx), 0.75 - (fx - 1.0) * (fx - 1.0), 0.5 * (fx - 0.5) * (fx - 0.5))
-
-
 @wp.kernel
 def particle_to_grid(
     start: int,
@@ -97,11 +83,18 @@ def particle_to_grid(
     dt: float,
     shape: wp.vec3i,
     free: wp.array(dtype=wp.int32),
+    n_fields: int,
+    node_max_damage: wp.array3d(dtype=float),
+    node_direction: wp.array3d(dtype=wp.vec3),
+    damage_gradient: wp.array(dtype=wp.vec3),
+    field_bits: wp.array(dtype=wp.int32),
     grid_momentum_mass: wp.array4d(dtype=wp.vec4),
 ):
     """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
 
-    Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4.
+    Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4, in
+    copy part * n_fields + field. With two fields (crack_fields.py) the field of each of the 27
+    nodes is bit 9 i + 3 j + k of field_bits[p], which G2P reads back.
     Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
     """
     p = wp.tid() + start
@@ -121,6 +114,7 @@ def particle_to_grid(
     # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
     step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
     corner = m * v[p] + dt * force[p] - dx * (affine * fx)
+    bits = int(0)
     for i in range(3):
         momentum_i = corner + float(i) * step[0]
         for j in range(3):
@@ -129,8 +123,15 @@ def particle_to_grid(
             for k in range(3):
                 momentum = momentum_ij + float(k) * step[2]
                 w = w_ij * wz[k]
-                wp.atomic_add(grid_momentum_mass, part, base[0] + i, base[1] + j, base[2] + k,
+                field = int(0)
+                if n_fields == 2:
+                    node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
+                    field = crack_field(node_max_damage[node[0], node[1], node[2]],
+                                        node_direction[node[0], node[1], node[2]], damage_gradient[p])
+                    bits = bits | (field << (9 * i + 3 * j + k))
+                wp.atomic_add(grid_momentum_mass, part * n_fields + field, base[0] + i, base[1] + j, base[2] + k,
                               w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
+    field_bits[p] = bits
 
 
 @wp.kernel
@@ -181,10 +182,22 @@ def ground_contact(v: wp.vec3, kind: int, friction: float):
     return tangential * (1.0 - friction * (-v[1]) / speed)
 
 
+@wp.func
+def node_velocity(total: wp.vec4, gravity: wp.vec3, dt: float, node: wp.vec3i, shape: wp.vec3i, walls: int):
+    """v = momentum / mass + dt g of one field's (momentum, mass), then the walls (walls != 0); 0 where it has no mass."""
+    if total[3] <= 0.0:
+        return wp.vec3(0.0)
+    v = wp.vec3(total[0], total[1], total[2]) / total[3] + dt * gravity
+    if walls != 0:
+        v = wall_slip(v, node, shape)
+    return v
+
+
 @wp.kernel
 def grid_update(
     offset: wp.vec3i,
     n_parts: int,
+    n_fields: int,
     gravity: wp.vec3,
     dt: float,
     shape: wp.vec3i,
@@ -194,10 +207,16 @@ def grid_update(
     walls: int,
     keep_unsupported: int,
     grid_momentum_mass: wp.array4d(dtype=wp.vec4),
-    grid_velocity: wp.array3d(dtype=wp.vec3),
-    unsupported_velocity: wp.array3d(dtype=wp.vec3),
+    node_damage_mass: wp.array3d(dtype=wp.vec2),
+    node_max_damage: wp.array3d(dtype=float),
+    node_gradient_norm: wp.array3d(dtype=float),
+    node_direction: wp.array3d(dtype=wp.vec3),
+    grid_velocity: wp.array4d(dtype=wp.vec3),
+    unsupported_velocity: wp.array4d(dtype=wp.vec3),
 ):
-    """v_i = (sum of momenta) / (sum of masses) + dt g, then ground and walls (walls != 0); clears the P2G copies.
+    """Per field, v_i = (sum of momenta) / (sum of masses) + dt g; the two fields of a crack in
+    contact (crack_fields.crack_contact); then walls (walls != 0) and ground. Clears the P2G copies
+    and, with two fields, the crack arrays.
 
     With keep_unsupported, the velocity before the ground's contact law is kept as well: rigid
     bodies meet the ground as whole bodies (rigid.py), not node by node."""
@@ -205,23 +224,33 @@ def grid_update(
     i += offset[0]
     j += offset[1]
     k += offset[2]
-    total = wp.vec4(0.0)
+    node = wp.vec3i(i, j, k)
+    total0 = wp.vec4(0.0)
+    total1 = wp.vec4(0.0)
     for part in range(n_parts):
-        total += grid_momentum_mass[part, i, j, k]
-        grid_momentum_mass[part, i, j, k] = wp.vec4(0.0)
-    m = total[3]
-    v = wp.vec3(0.0)
-    if m > 0.0:
-        v = wp.vec3(total[0], total[1], total[2]) / m + dt * gravity
-        if walls != 0:
-            v = wall_slip(v, wp.vec3i(i, j, k), shape)
+        total0 += grid_momentum_mass[part * n_fields, i, j, k]
+        grid_momentum_mass[part * n_fields, i, j, k] = wp.vec4(0.0)
+        if n_fields == 2:
+            total1 += grid_momentum_mass[part * 2 + 1, i, j, k]
+            grid_momentum_mass[part * 2 + 1, i, j, k] = wp.vec4(0.0)
+    v0 = node_velocity(total0, gravity, dt, node, shape, walls)
+    v1 = node_velocity(total1, gravity, dt, node, shape, walls)
+    if n_fields == 2:
+        if total0[3] > 0.0 and total1[3] > 0.0:
+            v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k])
+        node_damage_mass[i, j, k] = wp.vec2(0.0)
+        node_max_damage[i, j, k] = 0.0
+        node_gradient_norm[i, j, k] = 0.0
+        node_direction[i, j, k] = wp.vec3(0.0)
+    for field in range(n_fields):
+        v = v0
+        if field == 1:
+            v = v1
         if keep_unsupported != 0:
-            unsupported_velocity[i, j, k] = v
+            unsupported_velocity[field, i, j, k] = v
         if ground_kind != GROUND_NONE and j <= ground_node:
             v = ground_contact(v, ground_kind, friction)
-    elif keep_unsupported != 0:
-        unsupported_velocity[i, j, k] = v
-    grid_velocity[i, j, k] = v
+        grid_velocity[field, i, j, k] = v
 
 
 @wp.func
@@ -241,8 +270,10 @@ def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_face
 @wp.kernel
 def grid_to_particle(
     start: int,
-    grid_velocity: wp.array3d(dtype=wp.vec3),
-    unsupported_velocity: wp.array3d(dtype=wp.vec3),
+    n_fields: int,
+    field_bits: wp.array(dtype=wp.int32),
+    grid_velocity: wp.array4d(dtype=wp.vec3),
+    unsupported_velocity: wp.array4d(dtype=wp.vec3),
     own_ground: wp.array(dtype=wp.int32),
     origin: wp.vec3,
     dx: float,
@@ -262,7 +293,8 @@ def grid_to_particle(
     closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is closed
     (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall layer.
     Particles of bodies that meet the ground themselves (own_ground, rigid) gather the velocity
-    before the ground's contact law.
+    before the ground's contact law. With two fields each node is read in the particle's own
+    field there (field_bits, written by P2G).
     """
     p = wp.tid() + start
     if free[p] != 0:
@@ -293,7 +325,10 @@ def grid_to_particle(
             v_ij = wp.vec3(0.0)  # sum over k of wz v
             vz_ij = wp.vec3(0.0)  # ... of oz v
             for k in range(3):
-                vi = grid[base[0] + i, base[1] + j, base[2] + k]
+                field = int(0)
+                if n_fields == 2:
+                    field = (field_bits[p] >> (9 * i + 3 * j + k)) & 1
+                vi = grid[field, base[0] + i, base[1] + j, base[2] + k]
                 v_ij += wz[k] * vi
                 vz_ij += oz[k] * vi
             v_i += wy[j] * v_ij
@@ -410,8 +445,12 @@ class MPMSolver:
         self.rigid = None
 
         nx, ny, nz = grid.shape
-        self.grid_momentum_mass = wp.zeros((self.n_parts, nx, ny, nz), dtype=wp.vec4, device=device)
-        self.grid_velocity = wp.zeros((nx, ny, nz), dtype=wp.vec3, device=device)
+        # a second velocity field per node where a body can tear (crack_fields.py)
+        self.n_fields = 2 if breaks(materials) else 1
+        self.crack = CrackFields(grid.shape, n, device) if self.n_fields == 2 else CrackFields.unused(device)
+        self.field_bits = wp.zeros(n, dtype=wp.int32, device=device)
+        self.grid_momentum_mass = wp.zeros((self.n_parts * self.n_fields, nx, ny, nz), dtype=wp.vec4, device=device)
+        self.grid_velocity = wp.zeros((self.n_fields, nx, ny, nz), dtype=wp.vec3, device=device)
         self.unsupported_velocity = self.grid_velocity  # its own array once rigid bodies are attached
         self._shape = wp.vec3i(nx, ny, nz)
         self.ground_height = grid.origin[1] + BOUNDARY_NODES * grid.dx if ground.height is None else ground.height
@@ -468,22 +507,25 @@ class MPMSolver:
 
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
-        g, dev = self.grid, self.device
+        g, dev, crack = self.grid, self.device, self.crack
+        if self.n_fields == 2:
+            crack.find(self)
         self._per_particle((particle_to_grid, lambda s, part: [
             s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.free, self.grid_momentum_mass]))
+            self._origin, g.dx, dt, self._shape, self.free, self.n_fields, crack.node_max_damage,
+            crack.node_direction, crack.gradient, self.field_bits, self.grid_momentum_mass]))
         lo, hi = self._active_nodes()
         if np.all(hi > lo):  # else every particle is off the grid
             self._parallel([
                 (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
-                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape,
+                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.n_fields, self.gravity, dt, self._shape,
                     self.ground.kind, self._ground_node, self.ground.friction, int(self.walls),
-                    int(self.rigid is not None), self.grid_momentum_mass, self.grid_velocity,
-                    self.unsupported_velocity]))
+                    int(self.rigid is not None), self.grid_momentum_mass, *crack.node_arrays(),
+                    self.grid_velocity, self.unsupported_velocity]))
                 for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
             ])
         g2p = (grid_to_particle, lambda s, part: [
-            s, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx, dt, self._shape,
+            s, self.n_fields, self.field_bits, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx, dt, self._shape,
             self._closed_faces, self.prescribed,
             self.prescribed_velocity, self.free, self.x, self.v, self.C, self.F])
         flight = (free_flight, lambda s, part: [
