@@ -1,4 +1,5 @@
-"""Speed of the MLS-MPM substep: particle-substeps per second for an elastic cube on a 64^3 grid;
+"""Speed of the MLS-MPM substep: particle-substeps per second for an elastic cube on a 64^3 grid, as
+jelly and as fracture (which adds the crack fields' passes, stages/simulate/crack_fields.py);
 the same scene simulated as jelly and as rigid (substeps and seconds); and a 1 s fall with the ground
 off (the centre of mass against g t^2 / 2).
 
@@ -20,7 +21,7 @@ import time
 import numpy as np
 import warp as wp
 
-from schemas.materials import Jelly, Rigid
+from schemas.materials import Fracture, Jelly, Rigid
 from schemas.scene import PhysicsConfig
 from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver
 from stages.simulate.simulation import Simulation
@@ -37,14 +38,14 @@ def cube(n_particles: int, dx: float) -> np.ndarray:
     return corner + np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
 
 
-def time_substep(n_particles: int, threads: int | None, device: str, steps: int,
+def time_substep(material, n_particles: int, threads: int | None, device: str, steps: int,
                  repeats: int) -> tuple[int, int, float]:
-    """(particles, threads used, best seconds per substep) for one cube."""
+    """(particles, threads used, best seconds per substep) for one cube of `material`."""
     dx = 1.0 / GRID
     x = cube(n_particles, dx)
     volume = np.full(len(x), (dx / 2) ** 3)
     solver = MPMSolver(Grid((0.0, 0.0, 0.0), dx, (GRID + 1,) * 3), x, 1000 * volume, volume, np.zeros(len(x), int),
-                       [Jelly()], np.array([0.0, -9.81, 0.0]), Ground(GROUND_STICKY), device=device, n_parts=threads)
+                       [material], np.array([0.0, -9.81, 0.0]), Ground(GROUND_STICKY), device=device, n_parts=threads)
     dt = 1e-4
     for _ in range(10):
         solver.substep(dt)
@@ -102,13 +103,14 @@ def main() -> None:
     wp.config.quiet = True
     wp.init()
     cpu = wp.get_device(args.device).is_cpu
-    print(f"| particles | grid | threads | ms / substep | million particle-substeps / s |")
-    print(f"| --- | --- | --- | --- | --- |")
-    for n in (30_000, 100_000):
-        for threads in ((1, None) if cpu else (None,)):
-            count, used, seconds = time_substep(n, threads, args.device, args.steps, args.repeats)
-            print(f"| {count} | {GRID}^3 | {used if cpu else args.device} | {1e3 * seconds:.2f} | "
-                  f"{count / seconds / 1e6:.2f} |", flush=True)
+    print("| material | particles | grid | threads | ms / substep | million particle-substeps / s |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for material in (Jelly(youngs_modulus=2e5), Fracture(youngs_modulus=2e5)):
+        for n in (30_000, 100_000):
+            for threads in ((1, None) if cpu else (None,)):
+                count, used, seconds = time_substep(material, n, threads, args.device, args.steps, args.repeats)
+                print(f"| {material.preset} | {count} | {GRID}^3 | {used if cpu else args.device} | "
+                      f"{1e3 * seconds:.2f} | {count / seconds / 1e6:.2f} |", flush=True)
     print()
     rigid_against_jelly(args.device)
     print()

@@ -8,13 +8,13 @@ the pieces instead of two torn faces.
 Here each particle meets each node of its stencil in one of two fields: field 0 where its damage
 gradient points the way of the node's steepest one (the largest |grad D| among the particles
 there), field 1 where it points against it. The particles on either side of the ridge of damage
-(the crack) meet in different fields, move apart freely, and touch only where the fields
-approach (frictionless contact, grid_update). A node splits its particles where material in its
-stencil has begun to break (damage above 0), so that the stretch past the onset opens the crack
-instead of stretching the material beside it: the particles at the faces still lose their tension
-over the material's toughness, each within its own piece. (Split only where damage is 1, the
-material beside a crack kept breaking until the split came: on the torn test ball, 2 % of its
-particles flew loose between the pieces, against under 0.3 % so.)
+(the crack) meet in different fields. The fields of a node are bound by what is left of the
+material there (crack_contact): undamaged they move as one field would, and they move apart
+freely as the damage near the node goes to 1, so the material's toughness still sets how far it
+stretches before it tears; where they approach, they meet (frictionless contact). A node with
+no damage near it has one field. (Splitting only where damage is 1, with no binding before, the
+material beside a crack kept breaking until the split came: on the torn test ball 2 % of its
+particles flew loose between the pieces, against 0.7 % so.)
 
 Per substep, before P2G (only for scenes with a fracture object):
   damage_to_grid           node damage (the mass-weighted mean) and the largest damage near the node
@@ -150,19 +150,24 @@ def crack_field(damage: float, direction: wp.vec3, gradient: wp.vec3):
 
 
 @wp.func
-def crack_contact(v0: wp.vec3, m0: float, v1: wp.vec3, m1: float, direction: wp.vec3):
-    """Node velocities of the two fields after frictionless contact across the crack.
+def crack_contact(v0: wp.vec3, m0: float, v1: wp.vec3, m1: float, direction: wp.vec3, damage: float):
+    """Node velocities of the two fields of a crack, bound by what is left of the material.
 
-    Field 0 lies on the -direction side (its particles' damage rises along `direction`), so
-    the fields approach where (v0 - v1) . n > 0; then both take the pair's centre-of-mass
-    velocity along n, which conserves their momentum. Fields moving apart stay as they are.
+    Each field keeps the fraction `damage` (the largest near the node) of its velocity relative
+    to the pair's centre of mass v_cm: undamaged, both move at v_cm as one field would; broken,
+    they move freely. Field 0 lies on the -direction side (its particles' damage rises along
+    `direction`), so they approach where (v0 - v1) . n > 0, and there they also meet: no relative
+    velocity along n is left. Every change is a multiple of v_k - v_cm common to both fields, so
+    their momentum is conserved.
     """
+    v_cm = (m0 * v0 + m1 * v1) / (m0 + m1)
+    r0 = v0 - v_cm
+    r1 = v1 - v_cm
     n = wp.normalize(direction)
-    approach = wp.dot(v0 - v1, n)
-    if approach <= 0.0:
-        return v0, v1
-    along = wp.dot((m0 * v0 + m1 * v1) / (m0 + m1), n)
-    return v0 + (along - wp.dot(v0, n)) * n, v1 + (along - wp.dot(v1, n)) * n
+    if wp.dot(v0 - v1, n) > 0.0:
+        r0 = r0 - wp.dot(r0, n) * n
+        r1 = r1 - wp.dot(r1, n) * n
+    return v_cm + damage * r0, v_cm + damage * r1
 
 
 class CrackFields:

@@ -237,7 +237,7 @@ def grid_update(
     v1 = node_velocity(total1, gravity, dt, node, shape, walls)
     if n_fields == 2:
         if total0[3] > 0.0 and total1[3] > 0.0:
-            v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k])
+            v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k], node_max_damage[i, j, k])
         node_damage_mass[i, j, k] = wp.vec2(0.0)
         node_max_damage[i, j, k] = 0.0
         node_gradient_norm[i, j, k] = 0.0

@@ -132,15 +132,17 @@ def bodies(alpha: np.ndarray, min_px: int) -> tuple[int, int]:
 
 
 def test_torn_ball_ends_as_solid_pieces_without_dust(simulated):
-    """Torn in two, the ball reads as two solid bodies (each at least 5 % of the ball's picture at rest),
-    the gap between them empty; pieces under that hold under 1 % of the solid pixels (no dust)."""
+    """Torn, the ball reads as solid bodies (each at least 5 % of the ball's picture at rest), the gaps
+    between them empty; pieces under that hold under 1 % of the solid pixels (no dust). Cut in two
+    and moved apart, two bodies; pulled apart by the simulation, at least two."""
     name, _, _, coarse = simulated
-    if name != TORN_IN_TWO:
-        pytest.skip("the clean tear only")
+    if name not in (TORN_IN_TWO, "torn fracture ball"):
+        pytest.skip("the tears only")
     rest_px = int((coarse.alpha[0] >= 0.5).sum())
     assert bodies(coarse.alpha[0], rest_px // 20)[0] == 1
     pieces, dust = bodies(coarse.alpha[-1], rest_px // 20)
-    assert pieces == 2 and dust < 0.01 * (coarse.alpha[-1] >= 0.5).sum()
+    assert (pieces == 2 if name == TORN_IN_TWO else pieces >= 2), f"{name}: {pieces} bodies"
+    assert dust < 0.01 * (coarse.alpha[-1] >= 0.5).sum(), f"{name}: {dust} px of dust"
 
 
 def test_interior_takes_the_colour_of_the_surface_it_lies_under():
@@ -161,9 +163,8 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     the flow backend shows the render's interior colour, never photograph pixels read through it (here
     a white photograph, which would stand out)."""
     name, gaussians, trajectories, coarse = simulated
-    if name not in (TORN_IN_TWO, "sand heap"):
-        pytest.skip("a surface that opens and whose own render is the reference: in the fracture's debris "
-                    "the surface Gaussians themselves turn to grains, and the jelly's surface stays whole")
+    if name not in (TORN_IN_TWO, "sand heap", "torn fracture ball"):
+        pytest.skip("a surface that opens: the stretched jelly's stays whole")
     G = len(gaussians.means)
     t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
     F = t(trajectories.F[-1, :G])
