@@ -19,8 +19,8 @@ particles flew loose between the pieces, against 0.7 % so.)
 Per substep, before P2G (only for scenes with a fracture object):
   damage_to_grid           node damage (the mass-weighted mean) and the largest damage near the node
   damage_gradient          each particle's grad D, the MLS gradient of the node damage (as C is of v)
-  steepest_gradient_norm   each node's largest |grad D_p| among the particles of its stencil
-  steepest_gradient        ... and that gradient, the node's crack direction
+  steepest_gradient        each node's steepest grad D_p among the particles of its stencil, the
+                           node's crack direction (two launches: the largest norm, then its gradient)
 """
 from __future__ import annotations
 
@@ -93,29 +93,8 @@ def damage_gradient(
 
 
 @wp.kernel
-def steepest_gradient_norm(
-    x: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.int32),
-    gradient: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    node_gradient_norm: wp.array3d(dtype=float),
-):
-    """Each node's largest |grad D_p| among the particles whose stencil holds it."""
-    p = wp.tid()
-    if free[p] == 1:
-        return
-    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
-    norm = wp.length(gradient[p])
-    for i in range(3):
-        for j in range(3):
-            for k in range(3):
-                wp.atomic_max(node_gradient_norm, base[0] + i, base[1] + j, base[2] + k, norm)
-
-
-@wp.kernel
 def steepest_gradient(
+    select: int,
     x: wp.array(dtype=wp.vec3),
     free: wp.array(dtype=wp.int32),
     gradient: wp.array(dtype=wp.vec3),
@@ -125,19 +104,24 @@ def steepest_gradient(
     node_gradient_norm: wp.array3d(dtype=float),
     node_direction: wp.array3d(dtype=wp.vec3),
 ):
-    """The node's crack direction: the grad D_p of largest norm (ties write equal norms; any one will do)."""
+    """The node's crack direction, the grad D_p of largest norm among the particles whose stencil
+    holds it, in two launches: select 0 takes each node's largest |grad D_p|, select 1 writes the
+    gradient that has it (ties write equal norms; any one will do)."""
     p = wp.tid()
     if free[p] == 1:
         return
     base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
     norm = wp.length(gradient[p])
-    if norm <= 0.0:
+    if select == 1 and norm <= 0.0:
         return
     for i in range(3):
         for j in range(3):
             for k in range(3):
-                if norm >= node_gradient_norm[base[0] + i, base[1] + j, base[2] + k]:
-                    node_direction[base[0] + i, base[1] + j, base[2] + k] = gradient[p]
+                node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
+                if select == 0:
+                    wp.atomic_max(node_gradient_norm, node[0], node[1], node[2], norm)
+                elif norm >= node_gradient_norm[node[0], node[1], node[2]]:
+                    node_direction[node[0], node[1], node[2]] = gradient[p]
 
 
 @wp.func
@@ -202,9 +186,9 @@ class CrackFields:
             self.node_damage_mass, self.node_max_damage])
         solver._per_particle((damage_gradient, lambda s, part: [
             s, solver.x, solver.free, *grid, self.node_damage_mass, self.gradient]))
-        for kernel, nodes in ((steepest_gradient_norm, [self.node_gradient_norm]),
-                              (steepest_gradient, [self.node_gradient_norm, self.node_direction])):
-            wp.launch(kernel, dim=n, device=self.device, inputs=[solver.x, solver.free, self.gradient, *grid, *nodes])
+        for select in (0, 1):  # the largest norm at every node must be known before the one that has it
+            wp.launch(steepest_gradient, dim=n, device=self.device, inputs=[
+                select, solver.x, solver.free, self.gradient, *grid, self.node_gradient_norm, self.node_direction])
 
 
 def breaks(materials: list) -> bool:
