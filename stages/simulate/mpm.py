@@ -68,70 +68,80 @@ class Ground:
     height: float | None = None  # None: node plane BOUNDARY_NODES of the grid the solver starts on
 
 
-@wp.kernel
-def particle_to_grid(
-    start: int,
-    part: int,
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    C: wp.array(dtype=wp.mat33),
-    mass: wp.array(dtype=float),
-    volume_stress: wp.array(dtype=wp.mat33),
-    force: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    dx: float,
-    dt: float,
-    shape: wp.vec3i,
-    free: wp.array(dtype=wp.int32),
-    n_fields: int,
-    node_max_damage: wp.array3d(dtype=float),
-    node_direction: wp.array3d(dtype=wp.vec3),
-    damage_gradient: wp.array(dtype=wp.vec3),
-    field_bits: wp.array(dtype=wp.int32),
-    grid_momentum_mass: wp.array4d(dtype=wp.vec4),
-):
-    """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
+def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
+    """P2G compiled for n_fields (1, or 2 where a body can tear, crack_fields.py) velocity fields per
+    node: the one-field kernel, every scene without fracture, carries no per-node crack test."""
 
-    Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4, in
-    copy part * n_fields + field. With two fields (crack_fields.py) the field of each of the 27
-    nodes is bit 9 i + 3 j + k of field_bits[p], which G2P reads back.
-    Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
-    """
-    p = wp.tid() + start
-    if free[p] == 1:
-        return
-    if free[p] == 2:
-        free[p] = 0
-    inv_dx = 1.0 / dx
-    base, fx = stencil_base(x[p], origin, inv_dx, shape)
-    wx = quadratic_weights(fx[0])
-    wy = quadratic_weights(fx[1])
-    wz = quadratic_weights(fx[2])
-    m = mass[p]
-    # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
-    affine = m * C[p] - (4.0 * dt * inv_dx * inv_dx) * volume_stress[p]
-    # x_i - x_p = dx ((i, j, k) - fx), so the node momentum is linear in (i, j, k): start from the
-    # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
-    step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
-    corner = m * v[p] + dt * force[p] - dx * (affine * fx)
-    bits = int(0)
-    for i in range(3):
-        momentum_i = corner + float(i) * step[0]
-        for j in range(3):
-            momentum_ij = momentum_i + float(j) * step[1]
-            w_ij = wx[i] * wy[j]
-            for k in range(3):
-                momentum = momentum_ij + float(k) * step[2]
-                w = w_ij * wz[k]
-                field = int(0)
-                if n_fields == 2:
-                    node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
-                    field = crack_field(node_max_damage[node[0], node[1], node[2]],
-                                        node_direction[node[0], node[1], node[2]], damage_gradient[p])
-                    bits = bits | (field << (9 * i + 3 * j + k))
-                wp.atomic_add(grid_momentum_mass, part * n_fields + field, base[0] + i, base[1] + j, base[2] + k,
-                              w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
-    field_bits[p] = bits
+    @wp.kernel(module="unique")
+    def particle_to_grid(
+        start: int,
+        part: int,
+        x: wp.array(dtype=wp.vec3),
+        v: wp.array(dtype=wp.vec3),
+        C: wp.array(dtype=wp.mat33),
+        mass: wp.array(dtype=float),
+        volume_stress: wp.array(dtype=wp.mat33),
+        force: wp.array(dtype=wp.vec3),
+        origin: wp.vec3,
+        dx: float,
+        dt: float,
+        shape: wp.vec3i,
+        free: wp.array(dtype=wp.int32),
+        node_max_damage: wp.array3d(dtype=float),
+        node_direction: wp.array3d(dtype=wp.vec3),
+        damage_gradient: wp.array(dtype=wp.vec3),
+        field_bits: wp.array(dtype=wp.int32),
+        grid_momentum_mass: wp.array4d(dtype=wp.vec4),
+    ):
+        """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
+
+        Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4, in
+        copy part * n_fields + field. With two fields (crack_fields.py) the field of each of the 27
+        nodes is bit 9 i + 3 j + k of field_bits[p], which G2P reads back.
+        Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
+        """
+        p = wp.tid() + start
+        if free[p] == 1:
+            return
+        if free[p] == 2:
+            free[p] = 0
+        inv_dx = 1.0 / dx
+        base, fx = stencil_base(x[p], origin, inv_dx, shape)
+        wx = quadratic_weights(fx[0])
+        wy = quadratic_weights(fx[1])
+        wz = quadratic_weights(fx[2])
+        m = mass[p]
+        # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
+        affine = m * C[p] - (4.0 * dt * inv_dx * inv_dx) * volume_stress[p]
+        # x_i - x_p = dx ((i, j, k) - fx), so the node momentum is linear in (i, j, k): start from the
+        # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
+        step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
+        corner = m * v[p] + dt * force[p] - dx * (affine * fx)
+        bits = int(0)
+        for i in range(3):
+            momentum_i = corner + float(i) * step[0]
+            for j in range(3):
+                momentum_ij = momentum_i + float(j) * step[1]
+                w_ij = wx[i] * wy[j]
+                for k in range(3):
+                    momentum = momentum_ij + float(k) * step[2]
+                    w = w_ij * wz[k]
+                    field = int(0)
+                    if wp.static(n_fields == 2):
+                        node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
+                        field = crack_field(node_max_damage[node[0], node[1], node[2]],
+                                            node_direction[node[0], node[1], node[2]], damage_gradient[p])
+                        bits = bits | (field << (9 * i + 3 * j + k))
+                    copy = part * wp.static(n_fields) + field
+                    wp.atomic_add(grid_momentum_mass, copy, base[0] + i, base[1] + j, base[2] + k,
+                                  w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
+        if wp.static(n_fields == 2):
+            field_bits[p] = bits
+
+    return particle_to_grid
+
+
+PARTICLE_TO_GRID = {n_fields: particle_to_grid_kernel(n_fields) for n_fields in (1, 2)}
 
 
 @wp.kernel
@@ -267,95 +277,102 @@ def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_face
     return inside
 
 
-@wp.kernel
-def grid_to_particle(
-    start: int,
-    n_fields: int,
-    field_bits: wp.array(dtype=wp.int32),
-    grid_velocity: wp.array4d(dtype=wp.vec3),
-    unsupported_velocity: wp.array4d(dtype=wp.vec3),
-    own_ground: wp.array(dtype=wp.int32),
-    origin: wp.vec3,
-    dx: float,
-    dt: float,
-    shape: wp.vec3i,
-    closed_faces: wp.vec3i,
-    prescribed: wp.array(dtype=wp.int32),
-    prescribed_velocity: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    C: wp.array(dtype=wp.mat33),
-    F: wp.array(dtype=wp.mat33),
-):
-    """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
+def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
+    """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
-    closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is closed
-    (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall layer.
-    Particles of bodies that meet the ground themselves (own_ground, rigid) gather the velocity
-    before the ground's contact law. With two fields each node is read in the particle's own
-    field there (field_bits, written by P2G).
-    """
-    p = wp.tid() + start
-    if free[p] != 0:
-        return  # free_flight moves it, or it joins the grid at the next P2G
-    grid = grid_velocity
-    if own_ground[p] != 0:
-        grid = unsupported_velocity
-    inv_dx = 1.0 / dx
-    base, fx = stencil_base(x[p], origin, inv_dx, shape)
-    wx = quadratic_weights(fx[0])
-    wy = quadratic_weights(fx[1])
-    wz = quadratic_weights(fx[2])
-    # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
-    ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
-    oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
-    oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
-    # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
-    # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
-    vp = wp.vec3(0.0)
-    Bx = wp.vec3(0.0)
-    By = wp.vec3(0.0)
-    Bz = wp.vec3(0.0)
-    for i in range(3):
-        v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
-        vy_i = wp.vec3(0.0)  # ... of oy wz v
-        vz_i = wp.vec3(0.0)  # ... of wy oz v
-        for j in range(3):
-            v_ij = wp.vec3(0.0)  # sum over k of wz v
-            vz_ij = wp.vec3(0.0)  # ... of oz v
-            for k in range(3):
-                field = int(0)
-                if n_fields == 2:
-                    field = (field_bits[p] >> (9 * i + 3 * j + k)) & 1
-                vi = grid[field, base[0] + i, base[1] + j, base[2] + k]
-                v_ij += wz[k] * vi
-                vz_ij += oz[k] * vi
-            v_i += wy[j] * v_ij
-            vy_i += oy[j] * v_ij
-            vz_i += wy[j] * vz_ij
-        vp += wx[i] * v_i
-        Bx += ox[i] * v_i
-        By += wx[i] * vy_i
-        Bz += wx[i] * vz_i
-    Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
-    if prescribed[p] != 0:
-        vp = prescribed_velocity[p]  # velocity and fixed conditions override the grid
-    # a closed face keeps particles off its wall layer; through an open one they leave the grid
-    lo = float(BOUNDARY_NODES) * dx
-    xp = x[p] + dt * vp - origin
-    for a in range(3):
-        if closed_faces[a] >= 1:
-            xp[a] = wp.max(xp[a], lo)
-        if closed_faces[a] == 2:
-            xp[a] = wp.min(xp[a], float(shape[a] - 1) * dx - lo)
-    x[p] = xp + origin
-    v[p] = vp
-    C[p] = Cp
-    F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * F[p]
-    if not on_grid(x[p], origin, dx, shape, closed_faces, 0.0):
-        free[p] = 1
-        C[p] = wp.mat33(0.0)
+    @wp.kernel(module="unique")
+    def grid_to_particle(
+        start: int,
+        field_bits: wp.array(dtype=wp.int32),
+        grid_velocity: wp.array4d(dtype=wp.vec3),
+        unsupported_velocity: wp.array4d(dtype=wp.vec3),
+        own_ground: wp.array(dtype=wp.int32),
+        origin: wp.vec3,
+        dx: float,
+        dt: float,
+        shape: wp.vec3i,
+        closed_faces: wp.vec3i,
+        prescribed: wp.array(dtype=wp.int32),
+        prescribed_velocity: wp.array(dtype=wp.vec3),
+        free: wp.array(dtype=wp.int32),
+        x: wp.array(dtype=wp.vec3),
+        v: wp.array(dtype=wp.vec3),
+        C: wp.array(dtype=wp.mat33),
+        F: wp.array(dtype=wp.mat33),
+    ):
+        """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
+
+        closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is closed
+        (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall layer.
+        Particles of bodies that meet the ground themselves (own_ground, rigid) gather the velocity
+        before the ground's contact law. With two fields each node is read in the particle's own
+        field there (field_bits, written by P2G).
+        """
+        p = wp.tid() + start
+        if free[p] != 0:
+            return  # free_flight moves it, or it joins the grid at the next P2G
+        grid = grid_velocity
+        if own_ground[p] != 0:
+            grid = unsupported_velocity
+        inv_dx = 1.0 / dx
+        base, fx = stencil_base(x[p], origin, inv_dx, shape)
+        wx = quadratic_weights(fx[0])
+        wy = quadratic_weights(fx[1])
+        wz = quadratic_weights(fx[2])
+        # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
+        ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
+        oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
+        oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
+        # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
+        # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
+        vp = wp.vec3(0.0)
+        Bx = wp.vec3(0.0)
+        By = wp.vec3(0.0)
+        Bz = wp.vec3(0.0)
+        for i in range(3):
+            v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
+            vy_i = wp.vec3(0.0)  # ... of oy wz v
+            vz_i = wp.vec3(0.0)  # ... of wy oz v
+            for j in range(3):
+                v_ij = wp.vec3(0.0)  # sum over k of wz v
+                vz_ij = wp.vec3(0.0)  # ... of oz v
+                for k in range(3):
+                    field = int(0)
+                    if wp.static(n_fields == 2):
+                        field = (field_bits[p] >> (9 * i + 3 * j + k)) & 1
+                    vi = grid[field, base[0] + i, base[1] + j, base[2] + k]
+                    v_ij += wz[k] * vi
+                    vz_ij += oz[k] * vi
+                v_i += wy[j] * v_ij
+                vy_i += oy[j] * v_ij
+                vz_i += wy[j] * vz_ij
+            vp += wx[i] * v_i
+            Bx += ox[i] * v_i
+            By += wx[i] * vy_i
+            Bz += wx[i] * vz_i
+        Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
+        if prescribed[p] != 0:
+            vp = prescribed_velocity[p]  # velocity and fixed conditions override the grid
+        # a closed face keeps particles off its wall layer; through an open one they leave the grid
+        lo = float(BOUNDARY_NODES) * dx
+        xp = x[p] + dt * vp - origin
+        for a in range(3):
+            if closed_faces[a] >= 1:
+                xp[a] = wp.max(xp[a], lo)
+            if closed_faces[a] == 2:
+                xp[a] = wp.min(xp[a], float(shape[a] - 1) * dx - lo)
+        x[p] = xp + origin
+        v[p] = vp
+        C[p] = Cp
+        F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * F[p]
+        if not on_grid(x[p], origin, dx, shape, closed_faces, 0.0):
+            free[p] = 1
+            C[p] = wp.mat33(0.0)
+
+    return grid_to_particle
+
+
+GRID_TO_PARTICLE = {n_fields: grid_to_particle_kernel(n_fields) for n_fields in (1, 2)}
 
 
 @wp.kernel
@@ -510,9 +527,9 @@ class MPMSolver:
         g, dev, crack = self.grid, self.device, self.crack
         if self.n_fields == 2:
             crack.find(self)
-        self._per_particle((particle_to_grid, lambda s, part: [
+        self._per_particle((PARTICLE_TO_GRID[self.n_fields], lambda s, part: [
             s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.free, self.n_fields, crack.node_max_damage,
+            self._origin, g.dx, dt, self._shape, self.free, crack.node_max_damage,
             crack.node_direction, crack.gradient, self.field_bits, self.grid_momentum_mass]))
         lo, hi = self._active_nodes()
         if np.all(hi > lo):  # else every particle is off the grid
@@ -524,8 +541,9 @@ class MPMSolver:
                     self.grid_velocity, self.unsupported_velocity]))
                 for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
             ])
-        g2p = (grid_to_particle, lambda s, part: [
-            s, self.n_fields, self.field_bits, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx, dt, self._shape,
+        g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [
+            s, self.field_bits, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx,
+            dt, self._shape,
             self._closed_faces, self.prescribed,
             self.prescribed_velocity, self.free, self.x, self.v, self.C, self.F])
         flight = (free_flight, lambda s, part: [
