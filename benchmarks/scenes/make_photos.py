@@ -2,18 +2,39 @@
 
 - rocket/:     `rocket`, a launch pad's rocket taken as a 30 cm model (the scene's box holds it).
 - motorcycle/: the left view of `stereo_motorcycle`, taken as a 30 cm toy.
+- loaf/:       a loaf made of scikit-image's textures (`gravel` as its crust, `brick` as the table), for
+               tearing (benchmarks/tearing.py).
 
 Usage: python benchmarks/scenes/make_photos.py
 """
 from pathlib import Path
 
 import cv2
+import numpy as np
 import skimage.data
 
 from schemas.images import write_image
 
 HERE = Path(__file__).parent
 
+
+def loaf(height: int = 300, width: int = 420) -> np.ndarray:
+    """(height, width, 3) BGR: a rounded loaf (a superellipse of gravel in crust colours, lit from above)
+    with its shadow, on a brick table; the loaf spans about pixels [61, 114] to [359, 236]."""
+    table = cv2.resize(skimage.data.brick(), (width, height)).astype(np.float32)
+    image = np.stack([0.55 * table + 60, 0.5 * table + 50, 0.45 * table + 40], -1)
+    grain = cv2.resize(skimage.data.gravel(), (width, height)).astype(np.float32)[..., None] / 255
+    y, x = np.mgrid[0:height, 0:width]
+    cx, cy, ax, ay = 210, 175, 150, 62
+    inside = np.abs((x - cx) / ax) ** 3 + np.abs((y - cy) / ay) ** 3 < 1
+    light = np.clip(1.1 - 0.6 * (y - (cy - ay)) / (2 * ay), 0.4, 1.2)[..., None]
+    crust = (np.array([40, 110, 170]) + np.array([60, 70, 70]) * grain) * light
+    shadow = ((x - cx) / (1.05 * ax)) ** 2 + ((y - (cy + ay)) / 12) ** 2 < 1
+    image[shadow & ~inside] *= 0.5
+    image[inside] = crust[inside]
+    return np.clip(image, 0, 255).astype(np.uint8)
+
 if __name__ == "__main__":
     for name, rgb in (("rocket", skimage.data.rocket()), ("motorcycle", skimage.data.stereo_motorcycle()[0])):
         write_image(HERE / name / "photo.png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    write_image(HERE / "loaf" / "photo.png", loaf())

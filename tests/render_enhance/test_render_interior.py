@@ -73,8 +73,9 @@ def lattice_spacing_of(trajectories) -> float:
     return float(np.median(cKDTree(fill).query(fill, k=2)[0][:, 1]))
 
 
-def occupancy(positions: np.ndarray, F: np.ndarray, volumes: np.ndarray, K: np.ndarray, size: int) -> np.ndarray:
-    """(size, size) bool, float64 brute force: the pixels whose centre's ray passes through some
+def occupancy(positions: np.ndarray, F: np.ndarray, volumes: np.ndarray, K: np.ndarray,
+              shape: tuple[int, int]) -> np.ndarray:
+    """(rows, cols) = shape, bool, float64 brute force: the pixels whose centre's ray passes through some
     particle's share of the material, the ball of diameter cbrt(volume) about it deformed by its F
     ({x : |F^-1 (x - x_p)| <= cbrt(V_p) / 2}); the camera at the origin looking along +z."""
     x, F = positions.astype(np.float64), F.astype(np.float64)
@@ -84,10 +85,10 @@ def occupancy(positions: np.ndarray, F: np.ndarray, volumes: np.ndarray, K: np.n
     half = int(np.ceil(reach_px.max())) + 1
     centre = np.floor(x[:, :2] / x[:, 2:] * K[0, 0] + K[:2, 2]).astype(int)
     offsets = np.stack(np.meshgrid(np.arange(-half, half + 1), np.arange(-half, half + 1)), -1).reshape(-1, 2)
-    hit = np.zeros((size, size), bool)
+    hit = np.zeros(shape, bool)
     for chunk in np.array_split(np.arange(len(x)), max(1, len(x) // 2000)):
         pixels = centre[chunk, None, :] + offsets[None]  # (n, k, 2) col, row
-        inside = (pixels >= 0).all(-1) & (pixels < size).all(-1)
+        inside = (pixels >= 0).all(-1) & (pixels < np.array(shape[::-1])).all(-1)
         rays = np.concatenate([(pixels + 0.5 - K[:2, 2]) / K[0, 0], np.ones(pixels.shape[:2] + (1,))], -1)
         origin = np.einsum("nij,nj->ni", F_inverse[chunk], -x[chunk])[:, None, :]  # the camera, particle frame
         direction = np.einsum("nij,nkj->nki", F_inverse[chunk], rays)
@@ -108,7 +109,8 @@ def test_continuous_material_is_opaque_at_every_frame(simulated):
     half_px = int(np.ceil(spacing / 2 * FOCAL / trajectories.positions[..., 2].min()))
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * half_px + 1, 2 * half_px + 1))
     for t in range(len(trajectories.time_s)):
-        material = occupancy(trajectories.positions[t], trajectories.F[t], trajectories.volumes, gaussians.K, SIZE)
+        material = occupancy(trajectories.positions[t], trajectories.F[t], trajectories.volumes, gaussians.K,
+                             (SIZE, SIZE))
         material = cv2.erode(material.astype(np.uint8), disc) > 0
         assert material.sum() > 200, f"{name}, frame {t}"
         see_through = float((coarse.alpha[t][material] < 0.5).mean())
