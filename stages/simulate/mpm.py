@@ -203,64 +203,72 @@ def node_velocity(total: wp.vec4, gravity: wp.vec3, dt: float, node: wp.vec3i, s
     return v
 
 
-@wp.kernel
-def grid_update(
-    offset: wp.vec3i,
-    n_parts: int,
-    n_fields: int,
-    gravity: wp.vec3,
-    dt: float,
-    shape: wp.vec3i,
-    ground_kind: int,
-    ground_node: int,
-    friction: float,
-    walls: int,
-    keep_unsupported: int,
-    grid_momentum_mass: wp.array4d(dtype=wp.vec4),
-    node_damage_mass: wp.array3d(dtype=wp.vec2),
-    node_max_damage: wp.array3d(dtype=float),
-    node_gradient_norm: wp.array3d(dtype=float),
-    node_direction: wp.array3d(dtype=wp.vec3),
-    grid_velocity: wp.array4d(dtype=wp.vec3),
-    unsupported_velocity: wp.array4d(dtype=wp.vec3),
-):
-    """Per field, v_i = (sum of momenta) / (sum of masses) + dt g; the two fields of a crack in
-    contact (crack_fields.crack_contact); then walls (walls != 0) and ground. Clears the P2G copies
-    and, with two fields, the crack arrays.
+def grid_update_kernel(n_fields: int) -> wp.Kernel:
+    """The grid update compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
-    With keep_unsupported, the velocity before the ground's contact law is kept as well: rigid
-    bodies meet the ground as whole bodies (rigid.py), not node by node."""
-    i, j, k = wp.tid()
-    i += offset[0]
-    j += offset[1]
-    k += offset[2]
-    node = wp.vec3i(i, j, k)
-    total0 = wp.vec4(0.0)
-    total1 = wp.vec4(0.0)
-    for part in range(n_parts):
-        total0 += grid_momentum_mass[part * n_fields, i, j, k]
-        grid_momentum_mass[part * n_fields, i, j, k] = wp.vec4(0.0)
-        if n_fields == 2:
-            total1 += grid_momentum_mass[part * 2 + 1, i, j, k]
-            grid_momentum_mass[part * 2 + 1, i, j, k] = wp.vec4(0.0)
-    v0 = node_velocity(total0, gravity, dt, node, shape, walls)
-    v1 = node_velocity(total1, gravity, dt, node, shape, walls)
-    if n_fields == 2:
-        if total0[3] > 0.0 and total1[3] > 0.0:
-            v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k], node_max_damage[i, j, k])
-        node_damage_mass[i, j, k] = wp.vec2(0.0)
-        node_max_damage[i, j, k] = 0.0
-        node_gradient_norm[i, j, k] = 0.0
-        node_direction[i, j, k] = wp.vec3(0.0)
-    for field in range(n_fields):
-        v = v0
-        if field == 1:
-            v = v1
-        if keep_unsupported != 0:
-            unsupported_velocity[field, i, j, k] = v
-        if ground_kind != GROUND_NONE and j <= ground_node:
-            v = ground_contact(v, ground_kind, friction)
-        grid_velocity[field, i, j, k] = v
+    @wp.kernel(module="unique")
+    def grid_update(
+        offset: wp.vec3i,
+        n_parts: int,
+        gravity: wp.vec3,
+        dt: float,
+        shape: wp.vec3i,
+        ground_kind: int,
+        ground_node: int,
+        friction: float,
+        walls: int,
+        keep_unsupported: int,
+        grid_momentum_mass: wp.array4d(dtype=wp.vec4),
+        node_damage_mass: wp.array3d(dtype=wp.vec2),
+        node_max_damage: wp.array3d(dtype=float),
+        node_gradient_norm: wp.array3d(dtype=float),
+        node_direction: wp.array3d(dtype=wp.vec3),
+        grid_velocity: wp.array4d(dtype=wp.vec3),
+        unsupported_velocity: wp.array4d(dtype=wp.vec3),
+    ):
+        """Per field, v_i = (sum of momenta) / (sum of masses) + dt g; the two fields of a crack in
+        contact (crack_fields.crack_contact); then walls (walls != 0) and ground. Clears the P2G copies
+        and, with two fields, the crack arrays.
+
+        With keep_unsupported, the velocity before the ground's contact law is kept as well: rigid
+        bodies meet the ground as whole bodies (rigid.py), not node by node."""
+        i, j, k = wp.tid()
+        i += offset[0]
+        j += offset[1]
+        k += offset[2]
+        node = wp.vec3i(i, j, k)
+        total0 = wp.vec4(0.0)
+        total1 = wp.vec4(0.0)
+        for part in range(n_parts):
+            total0 += grid_momentum_mass[part * wp.static(n_fields), i, j, k]
+            grid_momentum_mass[part * wp.static(n_fields), i, j, k] = wp.vec4(0.0)
+            if wp.static(n_fields == 2):
+                total1 += grid_momentum_mass[part * 2 + 1, i, j, k]
+                grid_momentum_mass[part * 2 + 1, i, j, k] = wp.vec4(0.0)
+        v0 = node_velocity(total0, gravity, dt, node, shape, walls)
+        v1 = wp.vec3(0.0)
+        if wp.static(n_fields == 2):
+            v1 = node_velocity(total1, gravity, dt, node, shape, walls)
+            if total0[3] > 0.0 and total1[3] > 0.0:
+                v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k], node_max_damage[i, j, k])
+            node_damage_mass[i, j, k] = wp.vec2(0.0)
+            node_max_damage[i, j, k] = 0.0
+            node_gradient_norm[i, j, k] = 0.0
+            node_direction[i, j, k] = wp.vec3(0.0)
+        for field in range(wp.static(n_fields)):
+            v = v0
+            if field == 1:
+                v = v1
+            if keep_unsupported != 0:
+                unsupported_velocity[field, i, j, k] = v
+            if ground_kind != GROUND_NONE and j <= ground_node:
+                v = ground_contact(v, ground_kind, friction)
+            grid_velocity[field, i, j, k] = v
+
+    return grid_update
+
+
+GRID_UPDATE = {n_fields: grid_update_kernel(n_fields) for n_fields in (1, 2)}
 
 
 @wp.func
@@ -533,9 +541,10 @@ class MPMSolver:
             crack.node_direction, crack.gradient, self.field_bits, self.grid_momentum_mass]))
         lo, hi = self._active_nodes()
         if np.all(hi > lo):  # else every particle is off the grid
+            update = GRID_UPDATE[self.n_fields]
             self._parallel([
-                (lambda s=s, c=c: wp.launch(grid_update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
-                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.n_fields, self.gravity, dt, self._shape,
+                (lambda s=s, c=c: wp.launch(update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
+                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape,
                     self.ground.kind, self._ground_node, self.ground.friction, int(self.walls),
                     int(self.rigid is not None), self.grid_momentum_mass, *crack.node_arrays(),
                     self.grid_velocity, self.unsupported_velocity]))
