@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import re
 from pathlib import Path
 from typing import Annotated, Any, List, Literal, Optional, Tuple, Union, get_args
@@ -36,14 +35,6 @@ class CameraConfig(_Strict):
     fov_deg: float = Field(40.0, gt=1, lt=179, description="vertical field of view in degrees")
     pitch_deg: float = Field(0.0, ge=-89, le=89,
                              description="camera tilt down from horizontal in degrees; turns the default gravity")
-
-
-def camera_down(pitch_deg: float) -> tuple[float, float, float]:
-    """Unit 'down' of the photographed world in camera coordinates (x right, y down, z forward): the
-    picture's +y for a level camera; a camera pitched down by p looks partly along gravity, so down turns
-    about x toward the forward axis: (0, cos p, sin p)."""
-    p = math.radians(pitch_deg)
-    return (0.0, math.cos(p), math.sin(p))
 
 
 class ObjectConfig(_Strict):

@@ -15,8 +15,6 @@ import math
 
 import numpy as np
 
-from schemas.scene import camera_down
-
 from .constitutive import wave_speed
 from .mpm import BOUNDARY_NODES, Grid
 
@@ -34,7 +32,8 @@ def world_gravity(gravity: tuple | None, pitch_deg: float) -> np.ndarray:
     """
     if gravity is not None:
         return np.asarray(gravity, dtype=np.float64)
-    return STANDARD_GRAVITY * np.array(camera_down(pitch_deg))
+    p = math.radians(pitch_deg)
+    return STANDARD_GRAVITY * np.array([0.0, math.cos(p), math.sin(p)])
 
 
 def simulation_rotation(down: np.ndarray) -> np.ndarray:

@@ -4,9 +4,8 @@ A photographed object is in equilibrium. Two things of its reconstruction
 break that if taken as they are:
 
 - Its lowest point is wherever the reconstruction's error put it (a ball's
-  back closed straight behind the front ended in a keel), so a ground
-  through that point can hold the centre of mass off its support and tip
-  the body over. `support_height`
+  closed back ends in a keel), so a ground through that point can hold the
+  centre of mass off its support and tip the body over. `support_height`
   puts the ground plane at the lowest height at which each object resting on
   it stands: the convex hull of its points at or below the plane (seen from
   above) holds its centre of mass with a margin and, for a deformable body,

@@ -6,8 +6,7 @@ from scipy.spatial import ConvexHull
 
 import splat
 from stages.reconstruct.depth import object_depths
-from schemas.scene import camera_down
-from stages.reconstruct.geometry import intrinsics_from_fov
+from stages.reconstruct.geometry import down_direction, intrinsics_from_fov
 from stages.reconstruct.lift import lift_object
 from stages.reconstruct.metrics import iou
 from stages.reconstruct.synthetic import Capsule, photograph, side_view
@@ -19,7 +18,7 @@ def lifted():
     K = intrinsics_from_fov(40, 128, 96)
     photo = photograph(capsule, K, np.eye(4), 128, 96)
     depth = object_depths(photo.mask.astype(np.uint8), K, [capsule.size_m])[0]
-    return capsule, K, lift_object(depth, K, photo.rgb, 0, np.array(camera_down(0.0)))
+    return capsule, K, lift_object(depth, K, photo.rgb, 0, down_direction(0.0))
 
 
 def test_gaussians_are_valid_and_near_the_true_surface(lifted):
@@ -58,7 +57,7 @@ def test_a_pitched_cameras_ball_stands_on_a_base_under_its_centre(pitch):
     K = intrinsics_from_fov(40, 128, 96)
     photo = photograph(ball, K, np.eye(4), 128, 96)
     depth = object_depths(photo.mask.astype(np.uint8), K, [ball.size_m])[0]
-    down = np.array(camera_down(pitch))
+    down = down_direction(pitch)
     g = lift_object(depth, K, photo.rgb, 0, down)
     pixel_m = 0.6 / K[1, 1]
     across = np.linalg.svd(np.eye(3) - np.outer(down, down))[0][:, :2]  # two horizontal axes
