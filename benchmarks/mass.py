@@ -1,6 +1,6 @@
 """Mass and inertia of the simulated solid of reconstructed synthetic shapes, against their analytic values.
 
-    python benchmarks/mass.py [--sizes 96 128 192 256] [--iterations 100]
+    python benchmarks/mass.py [--sizes 96 128 192] [--iterations 100]
 
 Each shape (a 12 cm ball, the 25 cm capsule tilted 20 degrees, a 14 x 9 x 9 cm box seen face on) is
 ray-cast by stages/reconstruct/synthetic.py at each photograph width, reconstructed by pm-reconstruct
@@ -32,7 +32,7 @@ RHO = 1000.0
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", nargs="+", type=int, default=[96, 128, 192, 256])
+    parser.add_argument("--sizes", nargs="+", type=int, default=[96, 128, 192])
     parser.add_argument("--iterations", type=int, default=100)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)

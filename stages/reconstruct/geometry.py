@@ -24,13 +24,6 @@ def working_size(width: int, height: int, resolution: int) -> tuple[int, int]:
     return w, max(1, round(height * w / width))
 
 
-def down_direction(pitch_deg: float) -> np.ndarray:
-    """Unit 'down' (3,) in camera coordinates: the picture's +y for a level camera; a camera pitched
-    down by p looks partly along gravity, so down turns about x toward the forward axis: (0, cos p, sin p)."""
-    p = math.radians(pitch_deg)
-    return np.array([0.0, math.cos(p), math.sin(p)])
-
-
 def pixel_rays(K: np.ndarray, height: int, width: int) -> np.ndarray:
     """Unit ray directions (H,W,3) in camera coordinates through every pixel centre."""
     j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)

@@ -55,13 +55,11 @@ def _filled(depth: np.ndarray) -> np.ndarray:
     return depth[rows, cols]
 
 
-def _surfels(points: np.ndarray, pixels: np.ndarray, stride: int, colors: np.ndarray, object_id: int,
-             shift: np.ndarray | float = 0.0) -> Gaussians:
-    """Surfels tangent to ``points`` (H,W,3) on the pixels (H,W bool) of a stride-``stride`` grid, their
-    centres moved by ``shift`` (H,W,3 or a scalar) metres."""
+def _surfels(points: np.ndarray, pixels: np.ndarray, stride: int, colors: np.ndarray, object_id: int) -> Gaussians:
+    """Surfels at ``points`` (H,W,3) on the pixels (H,W bool) of a stride-``stride`` grid."""
     d_col = np.gradient(points, axis=1) * stride  # metres between neighbouring samples
     d_row = np.gradient(points, axis=0) * stride
-    d_col, d_row, centres = d_col[pixels], d_row[pixels], (points + shift)[pixels]
+    d_col, d_row, centres = d_col[pixels], d_row[pixels], points[pixels]
     normal = np.cross(d_col, d_row)
     normal /= np.linalg.norm(normal, axis=1, keepdims=True) + 1e-12
     axis1 = d_col - (d_col * normal).sum(1, keepdims=True) * normal
@@ -80,38 +78,37 @@ def _surfels(points: np.ndarray, pixels: np.ndarray, stride: int, colors: np.nda
                      np.full(count, object_id))
 
 
-def _rim_wall(front: np.ndarray, back: np.ndarray, pixels: np.ndarray, spacing: np.ndarray,
+def _rim_wall(front: np.ndarray, thickness: np.ndarray, pixels: np.ndarray, spacing: np.ndarray,
               colors: np.ndarray, object_id: int) -> Gaussians:
-    """Isotropic Gaussians on the straight lines from the front surface (H,W,3) to the back (H,W,3)
-    behind the silhouette's edge pixels, one ``spacing`` (H,W) apart."""
+    """Isotropic Gaussians from the front surface (H,W,3) straight back along the optical axis by
+    ``thickness`` (H,W), behind the silhouette's edge pixels, one spacing apart."""
     edge = pixels & ~ndimage.binary_erosion(pixels, border_value=0)
     rows, cols = np.nonzero(edge)
-    span = back[rows, cols] - front[rows, cols]
-    counts = np.maximum(1, np.ceil(np.linalg.norm(span, axis=1) / spacing[edge]).astype(int) - 1)
+    counts = np.maximum(1, np.ceil(thickness[edge] / spacing[edge]).astype(int) - 1)
     steps = np.concatenate([(np.arange(1, c + 1) / (c + 1)) for c in counts])
     idx = np.repeat(np.arange(len(rows)), counts)
-    means = front[rows[idx], cols[idx]] + steps[:, None] * span[idx]
+    means = front[rows[idx], cols[idx]] + np.outer(steps * thickness[rows[idx], cols[idx]], [0.0, 0.0, 1.0])
     sigma = SIGMA_PER_SPACING * spacing[rows[idx], cols[idx]]
     count = len(means)
     return Gaussians(means, np.repeat(sigma[:, None], 3, axis=1), np.tile([1.0, 0, 0, 0], (count, 1)),
                      np.full(count, INITIAL_OPACITY), colors[rows[idx], cols[idx]], np.full(count, object_id))
 
 
-def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id: int, down: np.ndarray,
+def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id: int,
                 front_stride: int = 1, back_stride: int = 2) -> Gaussians:
     """Closed surface of Gaussians of one object.
 
-    Front and back lie where each pixel's ray enters and leaves the object (the depth prior's
-    front and back), but the back goes no lower than the front's lowest point: what stands in a
-    photograph shows its lowest point, and the unseen back of a camera pitched down, or of the
-    rows below the optical axis, is the body's bottom. Followed down the rays it became a keel
-    behind the centre of mass, on which the example cup fell over; here it is a flat base.
+    The back lies straight behind the front along the optical axis, not where each pixel's
+    ray leaves the object: the object is then mirror-symmetric about its mid-depth plane.
+    Measured: on the coffee scene (camera pitched 35 degrees) the cup closed along the rays
+    moved 17-20 mm (median over its particles) under gravity alone in its first half second,
+    closed straight behind 5-7 mm; the synthetic capsule's side IoU is 0.81 this way, 0.84
+    along the rays.
 
     Args:
         depth: camera-space front/back z (H,W) of the object at the lifting resolution, NaN off it.
         K: (3,3) intrinsics at that resolution.
         photo: RGB u8 (H,W,3) at that resolution; front and back take the pixel's colour.
-        down: unit vector (3,) along gravity in camera coordinates.
         front_stride, back_stride: sample every n-th pixel (the back is never seen, so it can be coarser).
     """
     height, width = depth.front.shape
@@ -120,17 +117,13 @@ def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id:
     colors = photo.astype(np.float64) / 255.0
     pixels = depth.pixels
     front = rays * _filled(depth.front)[..., None]
-    back = rays * _filled(depth.back)[..., None]
-    lowest = (front[pixels] @ down).max()
-    onto_base = -np.maximum(back @ down - lowest, 0.0)[..., None] * down  # (H,W,3) m
+    thickness = _filled(depth.back) - _filled(depth.front)
+    back = front + thickness[..., None] * np.array([0.0, 0.0, 1.0])
     parts = []
-    for points, shift, stride in ((front, 0.0, front_stride), (back, onto_base, back_stride)):
+    for points, stride in ((front, front_stride), (back, back_stride)):
         grid = np.zeros_like(pixels)
         grid[stride // 2::stride, stride // 2::stride] = True
-        # The frames come from the sheet before it is pressed onto the base: there the back's rows
-        # can meet in one line and give a surfel no normal. Only the fill reads the base's means.
-        parts.append(_surfels(points, pixels & grid, stride, colors, object_id, shift))
-    back = back + onto_base
+        parts.append(_surfels(points, pixels & grid, stride, colors, object_id))
     wall_spacing = back_stride * depth.front / K[0, 0]  # metres per pixel at the front surface, times the stride
-    parts.append(_rim_wall(front, back, pixels, wall_spacing, colors, object_id))
+    parts.append(_rim_wall(front, thickness, pixels, wall_spacing, colors, object_id))
     return Gaussians.concatenate(parts)

@@ -15,7 +15,7 @@ from splat.project import NEAR_PLANE
 
 from .background import inpaint_background
 from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
-from .geometry import down_direction, intrinsics_from_fov, working_size
+from .geometry import intrinsics_from_fov, working_size
 from .lift import Gaussians, lift_object
 from .optimize import Settings, optimize
 from .ply import place_ply
@@ -105,9 +105,8 @@ def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depth
         return place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
     small = [ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True))
              for d in depths]
-    down = down_direction(scene.camera.pitch_deg)
     for stride in range(1, 9):  # the finest sampling within the budget
-        parts = [lift_object(d, K_work, photo_work, k, down, front_stride=stride, back_stride=2 * stride)
+        parts = [lift_object(d, K_work, photo_work, k, front_stride=stride, back_stride=2 * stride)
                  for k, d in enumerate(small)]
         if sum(map(len, parts)) <= MAX_GAUSSIANS:
             break
