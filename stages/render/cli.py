@@ -5,6 +5,8 @@ import argparse
 import logging
 from pathlib import Path
 
+import torch
+
 from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, check_lineage, read_artifact, write_artifact
 from schemas.files import check_writable, refuse_overwriting
@@ -38,6 +40,11 @@ def build_parser() -> argparse.ArgumentParser:
 def render(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     device = resolve_device(args.device)
+    if device == "cpu":
+        # One thread for torch's own ops (splat's kernels use the cores from their own threads). With two,
+        # MKL may use fewer at run time (MKL_DYNAMIC): a run under load wrote a coarse.h5 whose normals
+        # and source maps differed from the next run's by float rounding (up to 2e-5), not the same bytes.
+        torch.set_num_threads(1)
     refuse_overwriting({"--out": args.out, "--video": args.video},
                        {"--scene": scene.file, "--gaussians": args.gaussians, "--trajectories": args.trajectories})
     check_writable([args.out, args.video])
