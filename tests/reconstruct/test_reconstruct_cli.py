@@ -64,7 +64,7 @@ def differing_entries(a, b) -> list[str]:
         if x.shape != y.shape:
             named.append(f"{name}: shape {x.shape} against {y.shape}")
         elif not np.array_equal(x, y, equal_nan=x.dtype.kind == "f"):
-            largest = np.nanmax(np.abs(x - y)) if x.dtype.kind in "fiu" else "-"
+            largest = np.nanmax(np.abs(x.astype(np.float64) - y)) if x.dtype.kind in "fiu" else "-"  # no uint wrap
             named.append(f"{name}: {int(np.sum(x != y))} values differ, by up to {largest}")
     return named
 
