@@ -48,7 +48,7 @@ def main() -> None:
                 reconstruct(["--scene", str(scene), "--out", f"{tmp}/g.h5", "--device", "cpu"])
                 g = read_artifact(f"{tmp}/g.h5", GaussiansArtifact)
             sim = Simulation(PhysicsConfig(duration_s=0.01, grid=48), [M.Rigid(density=RHO)], g.means, g.object_id,
-                             silhouette=(g.mask, g.K))
+                             silhouette=(g.mask, g.K), prior_volumes=g.object_volumes)
             _, moments_sim = mass_properties(sim.masses, sim.rest_world)
             ratios = moments_sim / moments
             print(f"| {name} | {width} x {width * 3 // 4} | {len(sim.masses)} | {sim.volumes.sum() / volume:.3f} | "

@@ -63,7 +63,7 @@ def main() -> None:
                          else [PRESET_MODELS[preset]() for _ in scene.objects])
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
-                             silhouette=(g.mask, g.K), scene_file=scene.file)
+                             silhouette=(g.mask, g.K), prior_volumes=g.object_volumes, scene_file=scene.file)
             tr = sim.run()
             r = drift(sim, tr)
             label = preset if preset != "scene" else "scene's: " + ", ".join(

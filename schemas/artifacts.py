@@ -116,7 +116,7 @@ class GaussiansArtifact(Artifact):
     """gaussians.h5, written by pm-reconstruct. G Gaussians; photo H x W."""
 
     SCHEMA: ClassVar[str] = "physmotion.gaussians"
-    VERSION: ClassVar[int] = 1
+    VERSION: ClassVar[int] = 2
     NONEMPTY: ClassVar[tuple] = ("G", "H", "W")
 
     K: Annotated[Array, _f("/camera/K", "f8", "3,3")]
@@ -133,6 +133,9 @@ class GaussiansArtifact(Artifact):
     mask: Annotated[Array, _f("/image/mask", "u1", "H,W", gzip=True)]
     background: Annotated[Array, _f("/image/background", "u1", "H,W,3", gzip=True)]
     depth_prior: Annotated[Array, _f("/image/depth_prior", "f4", "H,W", gzip=True, nan=True)]  # NaN off objects
+    # m^3 each object's depth prior encloses, the volume its simulated particles carry; NaN: an init_ply's
+    # object, whose solid is its own shape
+    object_volumes: Annotated[Array, _f("/objects/volume", "f8", "O", nan=True)]
     loss: Annotated[Array, _f("/optimization/loss", "f4", "iterations,terms", nan=True)]  # NaN: not evaluated
     loss_terms: Annotated[List[str], _f("/optimization/loss@terms")]
 

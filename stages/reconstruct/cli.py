@@ -96,7 +96,7 @@ def reconstruct(args: argparse.Namespace) -> None:
         means=gaussians.means, scales=gaussians.scales, rotations=gaussians.rotations,
         opacities=gaussians.opacities, colors=gaussians.colors, object_id=gaussians.object_id,
         photo=prepared.photo, mask=prepared.labels, background=prepared.background,
-        depth_prior=prepared.depth_prior, loss=loss, loss_terms=LOSS_TERMS)
+        depth_prior=prepared.depth_prior, object_volumes=prepared.volumes, loss=loss, loss_terms=LOSS_TERMS)
     write_artifact(args.out, artifact, created_by="pm-reconstruct",
                    config_hash=config_hash(stage_keys(scene, "reconstruct")),
                    inputs={"files": {key: file_digest(path) for key, path in sources.items()}, "stages": {}})

@@ -84,6 +84,14 @@ class ObjectDepth:
         """Boolean (H,W): the object's pixels."""
         return np.isfinite(self.front)
 
+    def volume(self, K: np.ndarray) -> float:
+        """m^3 between the front and back surfaces within each pixel's pyramid of rays (K the (3,3)
+        intrinsics at this resolution): at depth z a pixel covers z^2 / (fx fy) m^2, so its column holds
+        (back^3 - front^3) / (3 fx fy). The body the depth prior describes, whatever the closure the
+        Gaussians take (lift.lift_object's back lies straight behind the front, and holds less)."""
+        pixels = self.pixels
+        return float(np.sum(self.back[pixels] ** 3 - self.front[pixels] ** 3) / (3.0 * K[0, 0] * K[1, 1]))
+
     def along_ray(self, K: np.ndarray) -> np.ndarray:
         """The front depth as distance along the ray from the camera centre (DESIGN.md's depth_prior)."""
         height, width = self.front.shape

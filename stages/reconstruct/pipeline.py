@@ -45,6 +45,7 @@ class Prepared:
     depths: list[ObjectDepth]  # per object, camera-space z (H,W)
     depth_prior: np.ndarray    # f32 (H,W) metres along the ray, NaN off objects
     initial: Gaussians
+    volumes: np.ndarray        # (objects,) m^3 the depth prior encloses; NaN for an init_ply's own shape
 
 
 def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -> np.ndarray:
@@ -87,7 +88,11 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
                              f"covering its pixels stands {np.nanmin(d.front):.3g} m from the camera, nearer than the "
                              f"renderer sees ({NEAR_PLANE_M:g} m)", "give the object's real size in metres")
     initial = initial_gaussians(scene, photo, labels, depths, K)
-    return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial)
+    volumes = np.array([np.nan if scene.reconstruct.init_ply is not None else d.volume(K) for d in depths])
+    for k, volume in enumerate(volumes):
+        if np.isfinite(volume):
+            log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
+    return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, volumes)
 
 
 def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depths: list[ObjectDepth],

@@ -38,6 +38,9 @@ log = logging.getLogger("physmotion.simulate")
 BLOW_UP_FACTOR = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
+# An object's solid and its depth prior's body differ by the closure's perspective (5-20 %); a solid
+# more than this factor off its prior's volume has a leak or a fold, and is named.
+SOLID_SHARE_WARN = 1.5
 
 
 def mass_properties(masses: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -60,13 +63,15 @@ class Simulation:
         pitch_deg: camera.pitch_deg, turns the default gravity.
         silhouette: (mask (H,W) u8 with k + 1 for object k, K (3,3)) of the photograph, world = its camera
             frame: each object's solid grows to the mask's area (fill.silhouette_gap); None: the means'.
+        prior_volumes: (objects,) m^3 each object's body as its depth prior lifted it (gaussians.h5's
+            /objects/volume), which its particles carry, all scaled alike; NaN or None: the solid's own.
         scene_file: named in error messages.
         device: Warp device ("cpu", "cuda:0").
     """
 
     def __init__(self, physics, materials: list, means: np.ndarray, object_id: np.ndarray, *,
-                 pitch_deg: float = 0.0, silhouette: tuple | None = None, scene_file: Path | str = "scene.yaml",
-                 device: str = "cpu"):
+                 pitch_deg: float = 0.0, silhouette: tuple | None = None, prior_volumes: np.ndarray | None = None,
+                 scene_file: Path | str = "scene.yaml", device: str = "cpu"):
         self.physics, self.materials, self.scene_file, self.device = physics, list(materials), scene_file, device
         means = np.asarray(means, np.float64)
         object_id = np.asarray(object_id, np.int64)
@@ -93,7 +98,7 @@ class Simulation:
         dx = domain.fit_grid(means_sim, physics.grid, ground_y=means_sim[:, 1].min() if ground.enabled else None,
                              walls=physics.walls).dx
         self.spacing = spacing = lattice_spacing(dx, physics.particles_per_cell)
-        fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette)
+        fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette, prior_volumes)
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
         self.object_id = np.concatenate([object_id] + [np.full(len(f), k) for f, _, k in fills])
@@ -135,10 +140,19 @@ class Simulation:
         self._log_bodies(rest_sim)
         self._check_budget()
 
-    def _fill_objects(self, means: np.ndarray, object_id: np.ndarray, dx: float,
-                      silhouette: tuple | None) -> tuple[list, np.ndarray]:
+    def _fill_objects(self, means: np.ndarray, object_id: np.ndarray, dx: float, silhouette: tuple | None,
+                      prior_volumes: np.ndarray | None) -> tuple[list, np.ndarray]:
         """Each object's interior: [(fill (N,3) world m, fill volumes (N,) m^3, object)], and the Gaussians'
-        volumes (G,) m^3; grown to the photograph's silhouette when it is given."""
+        volumes (G,) m^3; grown to the photograph's silhouette when it is given, and carrying the volume of
+        the depth prior's body where it is known.
+
+        The solid has the shape of the reconstruction's closed surface, whose back lies straight behind
+        its front (the body then stands as photographed, docs/ARCHITECTURE.md, "closing the back"). That
+        back keeps the front's scale across the view where the prior's rays spread: a ball of radius r
+        at distance z is about 0.75 r / z light so (the 12 cm test ball 0.6 m away 9 %, the example ball
+        16 %), while the prior's own body holds its volume to 3 %. Every particle's rest volume is scaled
+        by the same factor, so the mass is the prior's and the motion the solid's: mass and stress scale
+        together, and the centre of mass, the support and the material's behaviour stay as they were."""
         means_sim = means @ self.Q.T
         per_cell = self.physics.particles_per_cell
         fills, gauss_volume = [], np.zeros(len(means))
@@ -153,6 +167,17 @@ class Simulation:
                                                                view / np.linalg.norm(view))
             if silhouette is not None:
                 log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
+            if prior_volumes is not None and np.isfinite(prior_volumes[k]):
+                solid = float(gauss_volume[sel].sum() + fill_volume.sum())
+                scale = float(prior_volumes[k]) / solid
+                log.info("object %d: its solid holds %.3f of the %.4g m^3 its depth prior encloses; its "
+                         "particles carry the prior's", k, 1.0 / scale, prior_volumes[k])
+                if not 1.0 / SOLID_SHARE_WARN < scale < SOLID_SHARE_WARN:
+                    log.warning("object %d: its solid holds %.2f of the volume its depth prior encloses, far "
+                                "from it: the reconstruction's surface may not be closed; look at setup.png",
+                                k, 1.0 / scale)
+                gauss_volume[sel] *= scale
+                fill_volume = fill_volume * scale
             fills.append((fill @ self.Q, fill_volume, k))
         return fills, gauss_volume
 

@@ -21,7 +21,8 @@ def random_gaussians(G=7, H=5, W=6, seed=0) -> GaussiansArtifact:
         K=r.random((3, 3)), world_to_camera=np.eye(4), width=W, height=H, means=r.random((G, 3)),
         scales=r.random((G, 3)), rotations=r.random((G, 4)), opacities=r.random(G), colors=r.random((G, 3)),
         object_id=r.integers(0, 3, G), photo=r.integers(0, 255, (H, W, 3)), mask=r.integers(0, 3, (H, W)),
-        background=r.integers(0, 255, (H, W, 3)), depth_prior=r.random((H, W)), loss=r.random((4, 2)),
+        background=r.integers(0, 255, (H, W, 3)), depth_prior=r.random((H, W)), object_volumes=r.random(3),
+        loss=r.random((4, 2)),
         loss_terms=["colour", "hard_depth"])
 
 

@@ -65,7 +65,7 @@ def write_inputs(folder: Path, enhance: dict) -> dict:
         rotations=np.array([[1, 0, 0, 0]], np.float32), opacities=np.ones(1, np.float32),
         colors=np.full((1, 3), 0.5, np.float32), object_id=np.zeros(1, np.int32), photo=photo,
         mask=(alpha0 > 0.5).astype(np.uint8), background=background,
-        depth_prior=np.full((SIZE, SIZE), np.nan, np.float32), loss=np.zeros((0, 2), np.float32),
+        depth_prior=np.full((SIZE, SIZE), np.nan, np.float32), object_volumes=np.full(1, np.nan), loss=np.zeros((0, 2), np.float32),
         loss_terms=["colour", "depth"])
     frames = [_disc(24 + 6 * j, 32, 12) for j in range(FRAMES)]
     alpha = np.stack([a for a, _ in frames])

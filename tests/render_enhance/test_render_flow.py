@@ -43,7 +43,8 @@ def disc_gaussians() -> GaussiansArtifact:
         rotations=np.tile([1.0, 0, 0, 0], (2 * n, 1)), opacities=np.ones(2 * n),
         colors=np.concatenate([photo[rows, cols] / 255.0, np.tile([0.0, 1.0, 0.0], (n, 1))]),
         object_id=np.zeros(2 * n), photo=photo, mask=disc.astype(np.uint8), background=np.full((H, W, 3), 128),
-        depth_prior=np.where(disc, DEPTH, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
+        depth_prior=np.where(disc, DEPTH, np.nan), object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)),
+        loss_terms=["none"])
 
 
 def translated(gaussians: GaussiansArtifact, shifts_px) -> TrajectoriesArtifact:
@@ -245,7 +246,7 @@ def surfel_sphere(n: int = 6000, radius_m: float = 0.1, distance_m: float = 1.0,
         opacities=np.full(n, 0.9), colors=colours, object_id=np.zeros(n),
         photo=np.zeros((size, size, 3), np.uint8), mask=np.ones((size, size), np.uint8),
         background=np.zeros((size, size, 3), np.uint8), depth_prior=np.full((size, size), distance_m),
-        loss=np.zeros((0, 1)), loss_terms=["none"])
+        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
 
 
 def turned_sphere(turn_deg: float, radius_m: float = 0.1, distance_m: float = 1.0):

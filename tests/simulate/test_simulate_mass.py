@@ -1,9 +1,9 @@
 """Bodies weigh what their size says: the simulated solid of reconstructed synthetic shapes against analytic values.
 
-Each shape is ray-cast (stages/reconstruct/synthetic.py), reconstructed by pm-reconstruct at 96 x 72 or
-128 x 96 px (100 iterations, about 5 s) and filled as pm-simulate fills it (grown to the photograph's
-silhouette). At 192 and 256 px the ball comes out 9 and 5 % light (benchmarks/RESULTS.md, "Mass and
-inertia": the back closed straight behind the front takes the front's scale across the view).
+Each shape is ray-cast (stages/reconstruct/synthetic.py), reconstructed by pm-reconstruct at 96 x 72 to
+256 x 192 px (100 iterations, 5-15 s) and filled as pm-simulate fills it (grown to the photograph's
+silhouette, its particles carrying the volume its depth prior encloses: the back closed straight behind
+the front holds 5-9 % less, benchmarks/RESULTS.md, "Mass and inertia").
 """
 from __future__ import annotations
 
@@ -17,6 +17,7 @@ from stages.reconstruct.cli import main as reconstruct
 from stages.reconstruct.depth import inflation_half_thickness, largest_extent_px
 from stages.reconstruct.synthetic import Box, Capsule, write_scene
 from stages.simulate.simulation import Simulation, mass_properties
+from stages.simulate.synthetic import box_surface
 
 DENSITY = 1000.0  # the presets' default
 
@@ -27,7 +28,7 @@ def reconstructed_solid(shape, folder, width=128):
     reconstruct(["--scene", str(scene), "--out", str(folder / "gaussians.h5"), "--device", "cpu"])
     g = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
     sim = Simulation(PhysicsConfig(duration_s=0.01, grid=48), [M.Rigid(density=DENSITY)], g.means, g.object_id,
-                     silhouette=(g.mask, g.K))
+                     silhouette=(g.mask, g.K), prior_volumes=g.object_volumes)
     return sim, g
 
 
@@ -36,7 +37,7 @@ def principal_moments(sim) -> np.ndarray:
     return mass_properties(sim.masses, sim.rest_world)[1]
 
 
-@pytest.mark.parametrize("width", [96, 128])
+@pytest.mark.parametrize("width", [96, 128, 192, 256])
 def test_a_reconstructed_ball_has_the_mass_and_inertia_of_a_solid_ball(tmp_path, width):
     """A 12 cm ball: volume within 5 % of pi D^3 / 6, its moment of inertia (the mean principal moment) within
     10 % of 2/5 m r^2 with m of the ball, each principal moment within 15 % (the reconstruction's front is
@@ -73,3 +74,27 @@ def test_a_reconstructed_box_has_the_volume_its_depth_prior_gives(tmp_path):
     prior = float(np.sum(2 * half[mask]) * (z / f) ** 3)
     assert sim.volumes.sum() == pytest.approx(prior, rel=0.10)
     assert prior < box.volume
+
+
+def test_the_particles_carry_the_volume_the_depth_prior_encloses(device):
+    """A 10 cm box of surface points given a prior volume 1.2 times its own: its particles hold that volume
+    (all scaled alike, so its centre of mass stays), and 0.3 N in zero gravity moves its centre of mass by
+    F t^2 / (2 m) with m = rho times the prior's volume (tol 1 %). NaN: the solid's own volume."""
+    points = box_surface(np.zeros(3), np.full(3, 0.1), 0.01) + np.array([-0.05, -0.05, 0.45])
+    physics = PhysicsConfig(duration_s=0.2, fps=10, grid=20, gravity=[0, 0, 0], ground={"enabled": False},
+                            conditions=[{"type": "force", "force": [0.3, 0, 0]}])
+    ids = np.zeros(len(points), int)
+    own = Simulation(physics, [M.Jelly(youngs_modulus=5e4)], points, ids, prior_volumes=np.array([np.nan]),
+                     device=device)
+    prior = 1.2 * own.volumes.sum()
+    sim = Simulation(physics, [M.Jelly(youngs_modulus=5e4)], points, ids, prior_volumes=np.array([prior]),
+                     device=device)
+    assert own.volumes.sum() == pytest.approx(1e-3, rel=0.05)
+    assert sim.volumes.sum() == pytest.approx(prior, rel=1e-9)
+    np.testing.assert_allclose(sim.volumes / own.volumes, 1.2, rtol=1e-9)
+    np.testing.assert_allclose(mass_properties(sim.masses, sim.rest_world)[0],
+                               mass_properties(own.masses, own.rest_world)[0], atol=1e-12)
+    tr = sim.run()
+    centre = tr.masses @ tr.positions / tr.masses.sum()
+    mass = M.Jelly().density * prior
+    np.testing.assert_allclose(centre[1:, 0] - centre[0, 0], 0.5 * 0.3 / mass * tr.time_s[1:] ** 2, rtol=0.01)

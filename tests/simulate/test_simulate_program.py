@@ -127,7 +127,8 @@ def make_gaussians(path, means, object_id):
         K=np.array([[f, 0, W / 2], [0, f, H / 2], [0, 0, 1]]), world_to_camera=np.eye(4), width=W, height=H,
         means=means, scales=np.full((G, 3), 0.004), rotations=np.tile([1.0, 0, 0, 0], (G, 1)),
         opacities=np.ones(G), colors=np.full((G, 3), 0.5), object_id=object_id, photo=photo,
-        mask=np.zeros((H, W)), background=photo, depth_prior=np.zeros((H, W)), loss=np.zeros((0, 1)),
+        mask=np.zeros((H, W)), background=photo, depth_prior=np.zeros((H, W)),
+        object_volumes=np.full(int(np.max(object_id)) + 1, np.nan), loss=np.zeros((0, 1)),
         loss_terms=["l1"]), created_by="test", config_hash="0")
 
 
