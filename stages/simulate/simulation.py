@@ -38,8 +38,8 @@ log = logging.getLogger("physmotion.simulate")
 BLOW_UP_FACTOR = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
-# An object's solid and its depth prior's body differ by the closure's perspective (5-20 %); a solid
-# more than this factor off its prior's volume has a leak or a fold, and is named.
+# An object's solid and its depth prior's body differ by 2-26 % on the examples and photographs measured
+# (the closure's perspective, thin parts); a solid more than this factor off has a leak or a fold, and is named.
 SOLID_SHARE_WARN = 1.5
 
 
@@ -78,6 +78,9 @@ class Simulation:
         if object_id.min(initial=0) < 0 or object_id.max(initial=0) >= len(self.materials):
             raise InputError(scene_file, "objects", f"the Gaussians name objects up to {object_id.max()} but the "
                              f"scene lists {len(self.materials)}", "rerun pm-reconstruct with this scene")
+        if prior_volumes is not None and len(prior_volumes) != len(self.materials):
+            raise InputError(scene_file, "objects", f"the reconstruction gives the volumes of {len(prior_volumes)} "
+                             f"object(s) but the scene lists {len(self.materials)}", "rerun pm-reconstruct with this scene")
         for k in range(len(self.materials)):
             if not np.any(object_id == k):
                 raise InputError(scene_file, f"objects[{k}]", "the reconstruction has no Gaussian for this object",
@@ -149,8 +152,8 @@ class Simulation:
         The solid has the shape of the reconstruction's closed surface, whose back lies straight behind
         its front (the body then stands as photographed, docs/ARCHITECTURE.md, "closing the back"). That
         back keeps the front's scale across the view where the prior's rays spread: a ball of radius r
-        at distance z is about 0.75 r / z light so (the 12 cm test ball 0.6 m away 9 %, the example ball
-        16 %), while the prior's own body holds its volume to 3 %. Every particle's rest volume is scaled
+        at distance z is about 0.75 r / z light so (the 12 cm test ball 0.6 m away 2-6 %, the example ball
+        15 %), while the prior's own body holds its volume to 3 %. Every particle's rest volume is scaled
         by the same factor, so the mass is the prior's and the motion the solid's: mass and stress scale
         together, and the centre of mass, the support and the material's behaviour stay as they were."""
         means_sim = means @ self.Q.T

@@ -12,6 +12,7 @@ import pytest
 
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
+from schemas.program import InputError
 from schemas.scene import PhysicsConfig
 from stages.reconstruct.cli import main as reconstruct
 from stages.reconstruct.depth import inflation_half_thickness, largest_extent_px
@@ -98,3 +99,20 @@ def test_the_particles_carry_the_volume_the_depth_prior_encloses(device):
     centre = tr.masses @ tr.positions / tr.masses.sum()
     mass = M.Jelly().density * prior
     np.testing.assert_allclose(centre[1:, 0] - centre[0, 0], 0.5 * 0.3 / mass * tr.time_s[1:] ** 2, rtol=0.01)
+
+
+def test_a_solid_far_from_its_prior_is_named_and_a_count_that_does_not_match_is_refused(caplog):
+    """A solid holding half the volume its depth prior encloses (a leak, a fold) is named in the log; a
+    reconstruction that gives volumes for another number of objects than the scene lists is refused."""
+    points = box_surface(np.zeros(3), np.full(3, 0.1), 0.01) + np.array([-0.05, -0.05, 0.45])
+    ids = np.zeros(len(points), int)
+    physics = PhysicsConfig(duration_s=0.1, grid=20)
+    with caplog.at_level("WARNING", logger="physmotion.simulate"):
+        Simulation(physics, [M.Rigid()], points, ids, prior_volumes=np.array([1.3e-3]))
+    assert not any("far from it" in r.message for r in caplog.records)
+    with caplog.at_level("WARNING", logger="physmotion.simulate"):
+        Simulation(physics, [M.Rigid()], points, ids, prior_volumes=np.array([2e-3]))
+    assert any(r.message.startswith("object 0: its solid holds 0.4") and "far from it" in r.message
+               for r in caplog.records)
+    with pytest.raises(InputError, match=r"objects.*volumes of 2 object\(s\) but the scene lists 1"):
+        Simulation(physics, [M.Rigid()], points, ids, prior_volumes=np.array([1e-3, 1e-3]))
