@@ -3,7 +3,7 @@
 Each shape is ray-cast (stages/reconstruct/synthetic.py), reconstructed by pm-reconstruct at 96 x 72 to
 256 x 192 px (100 iterations, 5-15 s) and filled as pm-simulate fills it (grown to the photograph's
 silhouette, its particles carrying the volume its depth prior encloses: the back closed straight behind
-the front holds 5-9 % less, benchmarks/RESULTS.md, "Mass and inertia").
+the front holds 2-6 % less, benchmarks/RESULTS.md, "Mass and inertia").
 """
 from __future__ import annotations
 
