@@ -3,15 +3,16 @@
     python benchmarks/mass.py [--sizes 96 128 192] [--iterations 100]
     python benchmarks/mass.py --off-axis [--balls 120]
 
-Each shape (a 12 cm ball, the 25 cm capsule tilted 20 degrees, a 14 x 9 x 9 cm box seen face on) is
-ray-cast by stages/reconstruct/synthetic.py at each photograph width, reconstructed by pm-reconstruct
-and filled as pm-simulate fills it (grown to the photograph's silhouette, its particles carrying the
+Each shape (a 12 cm ball 0.6 m away, a 20 cm ball 0.35 m away, the 25 cm capsule tilted 20 degrees, a
+14 x 9 x 9 cm box seen face on) is ray-cast by stages/reconstruct/synthetic.py at each photograph width,
+reconstructed by pm-reconstruct and filled as pm-simulate fills it (grown to the photograph's silhouette, its particles carrying the
 volume its depth prior encloses). Printed: the solid's volume and its principal moments of inertia
 (density 1000) over the analytic ones and the particle count.
 
 --off-axis: the depth prior's own volume (no optimisation) of balls of radius 3-12 cm, 0.5-1.5 m away,
-0-24 degrees off the axis of a 50 degree camera at 320 x 240 (ray-cast silhouettes, random), over the
-ball's, per band of angle off the axis.
+0-24 degrees off the axis of a 50 degree camera at 320 x 240, and of upright capsules as wide (2-4 radii
+long, their axis along the image's columns) over the shape's, per band of angle off the axis (ray-cast
+silhouettes, random).
 """
 from __future__ import annotations
 
@@ -31,8 +32,8 @@ from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.reconstruct.cli import main as reconstruct  # noqa: E402
 from stages.reconstruct.depth import object_depths  # noqa: E402
-from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays  # noqa: E402
-from stages.reconstruct.synthetic import Box, Capsule, write_scene  # noqa: E402
+from stages.reconstruct.geometry import intrinsics_from_fov  # noqa: E402
+from stages.reconstruct.synthetic import Box, Capsule, photograph, write_scene  # noqa: E402
 from stages.simulate.simulation import Simulation, mass_properties  # noqa: E402
 
 RHO = 1000.0
@@ -49,15 +50,19 @@ def main() -> None:
     if args.off_axis:
         off_axis(args.balls)
         return
-    shapes = {"ball": Capsule(np.array([0.0, 0.0, 0.6]), np.array([1e-6, 0.0, 0.0]), 0.06),
-              "capsule": Capsule.tilted(), "box": Box(np.array([0.0, 0.0, 0.6]), np.array([0.07, 0.045, 0.045]))}
+    # (shape, field of view in degrees); the near ball fills half a 60 degree view, 35 cm away
+    shapes = {"ball": (Capsule(np.array([0.0, 0.0, 0.6]), np.array([1e-6, 0.0, 0.0]), 0.06), 40.0),
+              "near ball": (Capsule(np.array([0.0, 0.0, 0.35]), np.array([1e-6, 0.0, 0.0]), 0.1), 60.0),
+              "capsule": (Capsule.tilted(), 40.0),
+              "box": (Box(np.array([0.0, 0.0, 0.6]), np.array([0.07, 0.045, 0.045])), 40.0)}
     print("| shape | photo px | particles | volume / analytic | principal moments / analytic |")
     print("| --- | --- | --- | --- | --- |")
-    for name, shape in shapes.items():
+    for name, (shape, fov_deg) in shapes.items():
         volume, moments = shape.volume, shape.principal_moments(RHO)
         for width in args.sizes:
             with tempfile.TemporaryDirectory() as tmp:
-                scene = write_scene(Path(tmp), shape, width=width, height=width * 3 // 4, iterations=args.iterations)
+                scene = write_scene(Path(tmp), shape, fov_deg, width=width, height=width * 3 // 4,
+                                    iterations=args.iterations)
                 reconstruct(["--scene", str(scene), "--out", f"{tmp}/g.h5", "--device", "cpu"])
                 g = read_artifact(f"{tmp}/g.h5", GaussiansArtifact)
             sim = Simulation(PhysicsConfig(duration_s=0.01, grid=48), [M.Rigid(density=RHO)], g.means, g.object_id,
@@ -69,30 +74,32 @@ def main() -> None:
 
 
 def off_axis(count: int, band_deg: float = 8.0) -> None:
-    """Print the prior's volume over the ball's per band of angle off the optical axis."""
+    """Print the prior's volume over the shape's per band of angle off the optical axis: balls, and
+    upright capsules (their axis along the image's columns, at one depth) for the other reading of a
+    silhouette off the axis."""
     height, width = 240, 320
     K = intrinsics_from_fov(50, width, height)
-    rays = pixel_rays(K, height, width)
     rng = np.random.default_rng(0)
-    bands: dict[int, list[float]] = {}
-    for _ in range(count):
-        distance, radius = rng.uniform(0.5, 1.5), rng.uniform(0.03, 0.12)
-        off, turn = math.radians(rng.uniform(0, 3 * band_deg)), rng.uniform(0, 2 * math.pi)
-        direction = np.array([math.tan(off) * math.cos(turn), math.tan(off) * math.sin(turn), 1.0])
-        centre = distance * direction / np.linalg.norm(direction)
-        b = rays @ centre
-        mask = b ** 2 > centre @ centre - radius ** 2  # the pixel's ray meets the ball
-        if not mask.any() or mask[[0, -1]].any() or mask[:, [0, -1]].any():
-            continue  # cut by the border
-        ball = 4 / 3 * math.pi * radius ** 3
-        volume = object_depths(mask.astype(np.uint8), K, [2 * radius])[0].volume(K)
-        bands.setdefault(int(math.degrees(off) // band_deg), []).append(volume / ball)
-    print("| degrees off the axis | balls | prior volume / ball: mean | sd | min | max |")
-    print("| --- | --- | --- | --- | --- | --- |")
-    for band in sorted(bands):
-        v = np.array(bands[band])
-        print(f"| {band * band_deg:.0f}-{(band + 1) * band_deg:.0f} | {len(v)} | {v.mean():.3f} | {v.std():.3f} | "
-              f"{v.min():.3f} | {v.max():.3f} |")
+    bands: dict[tuple[str, int], list[float]] = {}
+    for kind in ("ball", "upright capsule"):
+        for _ in range(count):
+            distance, radius = rng.uniform(0.5, 1.5), rng.uniform(0.03, 0.12)
+            off, turn = math.radians(rng.uniform(0, 3 * band_deg)), rng.uniform(0, 2 * math.pi)
+            direction = np.array([math.tan(off) * math.cos(turn), math.tan(off) * math.sin(turn), 1.0])
+            centre = distance * direction / np.linalg.norm(direction)
+            half_axis = np.array([0.0, radius * rng.uniform(0.5, 1.5) if kind != "ball" else 1e-6, 0.0])
+            shape = Capsule(centre, half_axis, radius * (0.5 if kind != "ball" else 1.0))
+            mask = photograph(shape, K, np.eye(4), width, height).mask
+            if not mask.any() or mask[[0, -1]].any() or mask[:, [0, -1]].any():
+                continue  # cut by the border
+            volume = object_depths(mask.astype(np.uint8), K, [shape.size_m])[0].volume(K)
+            bands.setdefault((kind, int(math.degrees(off) // band_deg)), []).append(volume / shape.volume)
+    print("| shape | degrees off the axis | shapes | prior volume / shape: mean | sd | min | max |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for (kind, band), v in sorted(bands.items()):
+        v = np.array(v)
+        print(f"| {kind} | {band * band_deg:.0f}-{(band + 1) * band_deg:.0f} | {len(v)} | {v.mean():.3f} | "
+              f"{v.std():.3f} | {v.min():.3f} | {v.max():.3f} |")
 
 
 if __name__ == "__main__":

@@ -26,12 +26,17 @@ ball of tests/simulate, the means span 105 mm across and 120 mm in depth).
 So the solid is grown by a skin across the view (`skin`, measured by
 `silhouette_gap` on the means) until its silhouette has the mask's area:
 the photograph is the one measurement of the object's extent across the
-view, and the depth prior the one along it.
+view, and the depth prior the one along it. Where the depth prior's volume
+is known, what the solid still lacks of it lies on its sides (its back
+keeps the front's scale where the camera's rays spread), and `carry_volume`
+lays it on the side walls' particles.
 
 Time and memory are O(G + cells) on a grid no finer than the particle
 lattice, whatever the Gaussians' covariances (only their means are used).
 """
 from __future__ import annotations
+
+from typing import NamedTuple
 
 import numpy as np
 import cv2
@@ -138,8 +143,10 @@ def silhouette_gap(means: np.ndarray, mask: np.ndarray, K: np.ndarray) -> float:
 
 
 def inside_fraction(candidates: np.ndarray, means: np.ndarray, origin: np.ndarray, cell: float,
-                    skin: float, view: np.ndarray) -> np.ndarray:
-    """Fraction (shape of candidates) of each candidate cell inside the surface; 0 elsewhere.
+                    skin: float, view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fraction (shape of candidates) of each candidate cell inside the surface, 0 elsewhere; and how
+    much each cell's surface faces across the view (the sine of its normal's angle to `view`, 0 off the
+    surface layer: 1 on the side walls, 0 on the front and the back).
 
     The surface is the means' grown by `skin` across the unit `view` direction (so by skin times the
     normal's component across it). Cells more than SURFACE_DEPTH cells inside the
@@ -149,9 +156,10 @@ def inside_fraction(candidates: np.ndarray, means: np.ndarray, origin: np.ndarra
     0.2 of it inside, whatever the lattice's phase against the surface.
     """
     fraction = candidates.astype(float)
+    sideways = np.zeros(candidates.shape)
     near = np.argwhere(candidates & (distance_transform_edt(candidates) <= SURFACE_DEPTH))
     if len(near) == 0:
-        return fraction
+        return fraction, sideways
     inward = np.stack(np.gradient(gaussian_filter(fraction, 1.0)), axis=-1)[tuple(near.T)]
     outward = -inward / np.maximum(np.linalg.norm(inward, axis=1, keepdims=True), 1e-12)
     centres = origin + cell * (near + 0.5)
@@ -160,7 +168,8 @@ def inside_fraction(candidates: np.ndarray, means: np.ndarray, origin: np.ndarra
     offset = np.median(np.einsum("nkj,nj->nk", means[nearest] - centres[:, None, :], outward), axis=1)
     across = np.sqrt(np.clip(1.0 - (outward @ view) ** 2, 0.0, 1.0))
     fraction[tuple(near.T)] = np.clip(0.5 + (offset + skin * across) / cell, 0.0, 1.0)
-    return fraction
+    sideways[tuple(near.T)] = across
+    return fraction, sideways
 
 
 def across_view_disc(radius: float, view: np.ndarray) -> np.ndarray:
@@ -172,8 +181,23 @@ def across_view_disc(radius: float, view: np.ndarray) -> np.ndarray:
     return (np.sum(r * r, axis=-1) - along ** 2 <= radius ** 2) & (np.abs(along) <= 0.5)
 
 
+class Solid(NamedTuple):
+    """One object's filled solid: its new particles and the volume every particle represents."""
+
+    fill: np.ndarray
+    """(N,3) new particle positions, m."""
+    gaussian_volume: np.ndarray
+    """(G,) volume in m^3 each Gaussian particle represents."""
+    fill_volume: np.ndarray
+    """(N,) volume in m^3 of each fill particle."""
+    gaussian_sideways: np.ndarray
+    """(G,) how much the surface at each Gaussian faces across the view, 0-1 (inside_fraction)."""
+    fill_sideways: np.ndarray
+    """(N,) the same for each fill particle; 0 inside."""
+
+
 def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: float = 0.0,
-                view: np.ndarray = np.array([0.0, 0.0, 1.0])) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                view: np.ndarray = np.array([0.0, 0.0, 1.0])) -> Solid:
     """Fill one object's volume.
 
     Args:
@@ -185,10 +209,6 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: flo
             reconstruction's means sit inside the silhouette (its Gaussians reach past them), but its
             front and back lie where the depth prior put them: the solid grows across the view only.
 
-    Returns:
-        fill: (N,3) new particle positions, m.
-        gaussian_volume: (G,) volume in m^3 each Gaussian particle represents.
-        fill_volume: (N,) volume in m^3 of each fill particle.
     """
     cell = lattice_spacing(dx, particles_per_cell)  # one lattice particle per occupancy cell and axis
     radius = closing_radius(means, cell)
@@ -209,7 +229,7 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: flo
         solid = binary_dilation(solid, across_view_disc(skin / cell, view))
     # the surface cuts the cells about the solid's boundary, one layer beyond it included: each holds
     # the part of it inside; a cell with a Gaussian is kept, however little of it is inside
-    fraction = inside_fraction(binary_dilation(solid), means, origin, cell, skin, view)
+    fraction, sideways = inside_fraction(binary_dilation(solid), means, origin, cell, skin, view)
     gauss_cell = cell_index(means, origin, cell, shape)
     fraction[tuple(gauss_cell.T)] = np.maximum(fraction[tuple(gauss_cell.T)], MIN_FRACTION)
     occupied = fraction >= MIN_FRACTION
@@ -221,6 +241,23 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: flo
     count = occupied.astype(np.int64)
     np.add.at(count, tuple(gauss_cell.T), 1)
     per_particle = cell ** 3 * fraction / np.maximum(count, 1)
-    gaussian_volume = per_particle[tuple(gauss_cell.T)]
-    fill_volume = per_particle[tuple(cells.T)]
-    return fill, gaussian_volume, fill_volume
+    return Solid(fill, per_particle[tuple(gauss_cell.T)], per_particle[tuple(cells.T)],
+                 sideways[tuple(gauss_cell.T)], sideways[tuple(cells.T)])
+
+
+def carry_volume(volumes: np.ndarray, sideways: np.ndarray, target: float) -> np.ndarray:
+    """The particles' volumes (m^3, shape of volumes) made to carry `target` m^3 in all.
+
+    The solid's back lies straight behind its front, where the camera's rays spread: behind its rim the
+    body the photograph saw is wider than the solid by the rays' spread, so a solid holds less than its
+    depth prior encloses, and what it lacks lies on its sides. A lack is laid on the particles of the
+    side walls, each in proportion to its volume and to how much its surface faces across the view
+    (`sideways`), so that the mass sits as far out as the body's and its moment of inertia follows;
+    the interior keeps its cell's volume. An excess has no known place and is taken from every
+    particle alike, as is a lack where the solid has no side walls.
+    """
+    total = float(volumes.sum())
+    on_sides = float(np.sum(volumes * sideways))
+    if target <= total or on_sides <= 0.0:
+        return volumes * (target / total)
+    return volumes * (1.0 + (target - total) / on_sides * sideways)

@@ -14,7 +14,7 @@ from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, read_arti
 from schemas.scene import PhysicsConfig, SphereRegion
 from stages.simulate import cli, domain
 from stages.simulate.conditions import region_members
-from stages.simulate.fill import fill_object, silhouette_gap
+from stages.simulate.fill import carry_volume, fill_object, silhouette_gap
 from stages.simulate.simulation import Simulation
 from stages.simulate.synthetic import box_surface, boxes, fibonacci_sphere
 
@@ -30,10 +30,37 @@ def test_fill_of_a_sphere_shell_has_the_sphere_volume():
     d = rng.standard_normal((20000, 3))
     r, dx = 0.1, 0.01
     means = r * d / np.linalg.norm(d, axis=1, keepdims=True)
-    fill, gauss_volume, fill_volume = fill_object(means, dx, 8)
+    fill, gauss_volume, fill_volume, _, _ = fill_object(means, dx, 8)
     assert gauss_volume.sum() + fill_volume.sum() == pytest.approx(4 / 3 * math.pi * r ** 3, rel=0.04)
     assert np.linalg.norm(fill, axis=1).max() < r + math.sqrt(3) / 2 * (dx / 2)
     assert len(fill) == pytest.approx(8 * 4 / 3 * math.pi * (r / dx) ** 3, rel=0.12)
+
+
+def test_a_lack_of_volume_laid_on_the_side_walls_gives_the_wider_ball_its_inertia():
+    """The 10 cm ball's solid given the volume of a ball 3 % wider (what a solid whose back keeps its front's
+    scale lacks): laid on the side walls, its mean principal moment is within 2 % of 2/5 m R^2 for the wider
+    ball (scaled alike it is 5 % low), its sum is the target's and its interior keeps its volume; an excess
+    is taken from every particle alike."""
+    r, R = 0.1, 0.103
+    means = fibonacci_sphere(20000, r)
+    solid = fill_object(means, 0.01, 8)
+    points = np.concatenate([means, solid.fill])
+    volumes = np.concatenate([solid.gaussian_volume, solid.fill_volume])
+    sideways = np.concatenate([solid.gaussian_sideways, solid.fill_sideways])
+
+    def mean_moment(v):  # a third of the inertia tensor's trace, m^5 (density 1)
+        d = points - v @ points / v.sum()
+        return 2 / 3 * np.sum(v * np.sum(d * d, axis=1))
+
+    target = 4 / 3 * math.pi * R ** 3
+    carried = carry_volume(volumes, sideways, target)
+    assert carried.sum() == pytest.approx(target, rel=1e-12)
+    assert mean_moment(carried) == pytest.approx(0.4 * target * R ** 2, rel=0.02)
+    assert mean_moment(volumes * target / volumes.sum()) < 0.96 * 0.4 * target * R ** 2
+    inside = sideways == 0
+    assert inside.sum() > len(solid.fill) // 2
+    np.testing.assert_array_equal(carried[inside], volumes[inside])
+    np.testing.assert_allclose(carry_volume(volumes, sideways, 0.9 * volumes.sum()), 0.9 * volumes, rtol=1e-12)
 
 
 @pytest.mark.parametrize("dx", [0.013, 0.0175, 0.025])
@@ -48,7 +75,7 @@ def test_fill_volume_does_not_depend_on_the_lattice(dx):
     ball = fibonacci_sphere(4000, 0.05)
 
     def volume(means):
-        _, gauss_volume, fill_volume = fill_object(means, dx, 8)
+        _, gauss_volume, fill_volume, _, _ = fill_object(means, dx, 8)
         return gauss_volume.sum() + fill_volume.sum()
 
     assert volume(box) == pytest.approx(1e-3, rel=0.05)
@@ -69,7 +96,7 @@ def test_skin_grows_the_solid_across_the_view_only():
     skin = silhouette_gap(means + [0, 0, z], mask, K)
     assert skin == pytest.approx(0.01, abs=5e-4)
     dx = 0.01
-    fill, _, _ = fill_object(means, dx, 8, skin, np.array([0.0, 0.0, 1.0]))
+    fill = fill_object(means, dx, 8, skin, np.array([0.0, 0.0, 1.0])).fill
     cell = dx / 2
     assert np.ptp(fill[:, 0]) == pytest.approx(0.12 - cell, abs=cell)
     assert np.ptp(fill[:, 2]) == pytest.approx(0.10 - cell, abs=cell)
@@ -78,7 +105,7 @@ def test_skin_grows_the_solid_across_the_view_only():
 def test_fill_ignores_huge_covariances_and_is_bounded_by_the_grid():
     """Only the means matter: the occupancy grid is at most (extent / dx + 3)^3 cells whatever else."""
     means = box_surface((0, 0, 0), (0.1, 0.05, 0.02), 0.005)
-    fill, _, _ = fill_object(means, 0.01, 1)
+    fill = fill_object(means, 0.01, 1).fill
     assert len(fill) <= (10 + 3) * (5 + 3) * (2 + 3)
     assert np.all((fill > -0.011) & (fill < 0.111))
 
