@@ -209,6 +209,9 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: flo
             reconstruction's means sit inside the silhouette (its Gaussians reach past them), but its
             front and back lie where the depth prior put them: the solid grows across the view only.
 
+    Returns:
+        The Solid: the fill particles, every particle's volume, and how much its surface faces across
+        the view (for carry_volume).
     """
     cell = lattice_spacing(dx, particles_per_cell)  # one lattice particle per occupancy cell and axis
     radius = closing_radius(means, cell)
