@@ -5,14 +5,14 @@
 
 Each shape (a 12 cm ball 0.6 m away, a 20 cm ball 0.35 m away, the 25 cm capsule tilted 20 degrees, a
 14 x 9 x 9 cm box seen face on) is ray-cast by stages/reconstruct/synthetic.py at each photograph width,
-reconstructed by pm-reconstruct and filled as pm-simulate fills it (grown to the photograph's silhouette, its particles carrying the
-volume its depth prior encloses). Printed: the solid's volume and its principal moments of inertia
+reconstructed by pm-reconstruct and filled as pm-simulate fills it (grown to the photograph's silhouette,
+its particles carrying the volume its depth prior encloses). Printed: the solid's volume and its principal moments of inertia
 (density 1000) over the analytic ones and the particle count.
 
 --off-axis: the depth prior's own volume (no optimisation) of balls of radius 3-12 cm, 0.5-1.5 m away,
-0-24 degrees off the axis of a 50 degree camera at 320 x 240, and of upright capsules as wide (2-4 radii
-long, their axis along the image's columns) over the shape's, per band of angle off the axis (ray-cast
-silhouettes, random).
+0-24 degrees off the axis of a 50 degree camera at 320 x 240, and of upright capsules half as wide, 2-4
+times as long as wide (their axis along the image's columns, at one depth), over the shape's, per band of
+angle off the axis (ray-cast silhouettes, random).
 """
 from __future__ import annotations
 
@@ -87,8 +87,10 @@ def off_axis(count: int, band_deg: float = 8.0) -> None:
             off, turn = math.radians(rng.uniform(0, 3 * band_deg)), rng.uniform(0, 2 * math.pi)
             direction = np.array([math.tan(off) * math.cos(turn), math.tan(off) * math.sin(turn), 1.0])
             centre = distance * direction / np.linalg.norm(direction)
-            half_axis = np.array([0.0, radius * rng.uniform(0.5, 1.5) if kind != "ball" else 1e-6, 0.0])
-            shape = Capsule(centre, half_axis, radius * (0.5 if kind != "ball" else 1.0))
+            if kind == "ball":
+                shape = Capsule(centre, np.array([1e-6, 0.0, 0.0]), radius)
+            else:  # as long as the ball is wide or twice that, half as wide
+                shape = Capsule(centre, np.array([0.0, radius * rng.uniform(0.5, 1.5), 0.0]), radius / 2)
             mask = photograph(shape, K, np.eye(4), width, height).mask
             if not mask.any() or mask[[0, -1]].any() or mask[:, [0, -1]].any():
                 continue  # cut by the border

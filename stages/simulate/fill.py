@@ -182,18 +182,15 @@ def across_view_disc(radius: float, view: np.ndarray) -> np.ndarray:
 
 
 class Solid(NamedTuple):
-    """One object's filled solid: its new particles and the volume every particle represents."""
+    """One object's filled solid: its new particles, and per particle (the object's Gaussians first, then
+    the new ones) the volume it represents and how its surface faces."""
 
     fill: np.ndarray
     """(N,3) new particle positions, m."""
-    gaussian_volume: np.ndarray
-    """(G,) volume in m^3 each Gaussian particle represents."""
-    fill_volume: np.ndarray
-    """(N,) volume in m^3 of each fill particle."""
-    gaussian_sideways: np.ndarray
-    """(G,) how much the surface at each Gaussian faces across the view, 0-1 (inside_fraction)."""
-    fill_sideways: np.ndarray
-    """(N,) the same for each fill particle; 0 inside."""
+    volume: np.ndarray
+    """(G+N,) volume in m^3 each particle represents."""
+    sideways: np.ndarray
+    """(G+N,) how much the surface at each particle faces across the view, 0-1 (inside_fraction); 0 inside."""
 
 
 def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: float = 0.0,
@@ -244,8 +241,8 @@ def fill_object(means: np.ndarray, dx: float, particles_per_cell: int, skin: flo
     count = occupied.astype(np.int64)
     np.add.at(count, tuple(gauss_cell.T), 1)
     per_particle = cell ** 3 * fraction / np.maximum(count, 1)
-    return Solid(fill, per_particle[tuple(gauss_cell.T)], per_particle[tuple(cells.T)],
-                 sideways[tuple(gauss_cell.T)], sideways[tuple(cells.T)])
+    particle_cell = tuple(np.concatenate([gauss_cell, cells]).T)
+    return Solid(fill, per_particle[particle_cell], sideways[particle_cell])
 
 
 def carry_volume(volumes: np.ndarray, sideways: np.ndarray, target: float) -> np.ndarray:

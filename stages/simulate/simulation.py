@@ -171,22 +171,22 @@ class Simulation:
             solid = fill_object(means_sim[sel], dx, per_cell, skin, view / np.linalg.norm(view))
             if silhouette is not None:
                 log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
-            volumes = np.concatenate([solid.gaussian_volume, solid.fill_volume])
+            volumes = solid.volume
             if prior_volumes is not None and np.isfinite(prior_volumes[k]):
                 share = float(volumes.sum()) / float(prior_volumes[k])
                 if not 1.0 / SOLID_SHARE_WARN < share < SOLID_SHARE_WARN:
                     log.warning("object %d: its solid holds %.2f of the volume its depth prior encloses, far "
                                 "from it: the reconstruction's surface may not be closed; look at setup.png",
                                 k, share)
-                carried = carry_volume(volumes, np.concatenate([solid.gaussian_sideways, solid.fill_sideways]),
-                                       float(prior_volumes[k]))
+                carried = carry_volume(volumes, solid.sideways, float(prior_volumes[k]))
+                factor = carried / volumes
                 log.info("object %d: its solid holds %.3f of the %.4g m^3 its depth prior encloses; its "
-                         "particles carry the prior's (%s)", k, share, prior_volumes[k],
-                         "taken from all alike" if share > 1.0 else
-                         f"the lack on its side walls, up to {np.max(carried / volumes):.2f} times their own")
+                         "particles carry the prior's, %.2f-%.2f times their own (a lack on the side walls, an "
+                         "excess from all alike)", k, share, prior_volumes[k], factor.min(), factor.max())
                 volumes = carried
-            gauss_volume[sel] = volumes[:len(solid.gaussian_volume)]
-            fills.append((solid.fill @ self.Q, volumes[len(solid.gaussian_volume):], k))
+            gaussians = int(sel.sum())
+            gauss_volume[sel] = volumes[:gaussians]
+            fills.append((solid.fill @ self.Q, volumes[gaussians:], k))
         return fills, gauss_volume
 
     def _check_budget(self) -> None:

@@ -40,7 +40,7 @@ def torn_in_two(gaussians) -> TrajectoriesArtifact:
     """The sphere filled as pm-simulate fills it, cut through its centre by a plane turned 17 degrees
     towards the camera (so that one torn face is seen), its halves moved apart rigidly sideways: 0,
     2 and 8 cm in all."""
-    fill, gaussian_volume, fill_volume, _, _ = fill_object(gaussians.means.astype(np.float64), 0.02, 8)
+    fill, volumes, _ = fill_object(gaussians.means.astype(np.float64), 0.02, 8)
     rest = np.concatenate([gaussians.means, fill])
     P, G, T = len(rest), len(gaussians.means), 3
     normal = np.array([1.0, 0.0, -0.3]) / np.hypot(1.0, 0.3)
@@ -48,7 +48,7 @@ def torn_in_two(gaussians) -> TrajectoriesArtifact:
     positions = rest[None] + np.array([0.0, 0.01, 0.04])[:, None, None] * side[None, :, None] * [1, 0, 0]
     zeros = np.zeros(T)
     return TrajectoriesArtifact(
-        rest_positions=rest, volumes=np.concatenate([gaussian_volume, fill_volume]), masses=np.ones(P),
+        rest_positions=rest, volumes=volumes, masses=np.ones(P),
         material_id=np.full(P, M.PRESETS.index("fracture")), object_id=np.zeros(P), is_gaussian=np.arange(P) < G,
         positions=positions, F=np.tile(np.eye(3), (T, P, 1, 1)), time_s=np.arange(T) / 10.0, substeps=zeros,
         kinetic_energy=zeros, potential_energy=zeros, momentum=np.zeros((T, 3)), angular_momentum=np.zeros((T, 3)),

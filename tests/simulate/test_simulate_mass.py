@@ -80,8 +80,8 @@ def test_a_reconstructed_box_has_the_volume_its_depth_prior_gives(tmp_path):
 def test_the_particles_carry_the_volume_the_depth_prior_encloses(device):
     """A 10 cm box of surface points given a prior volume 1.2 times its own: its particles hold that volume,
     the lack laid on its four side walls (those across the view) and none on its core, its front or its back,
-    so its centre of mass stays (within 0.5 mm); 0.3 N in zero gravity moves its centre of mass by F t^2 / (2 m) with m = rho
-    times the prior's volume (tol 1 %). NaN: the solid's own volume."""
+    so its centre of mass stays (within 0.5 mm); 0.3 N in zero gravity moves its centre of mass by
+    F t^2 / (2 m) with m = rho times the prior's volume (tol 1 %). NaN: the solid's own volume."""
     points = box_surface(np.zeros(3), np.full(3, 0.1), 0.01) + np.array([-0.05, -0.05, 0.45])
     physics = PhysicsConfig(duration_s=0.2, fps=10, grid=20, gravity=[0, 0, 0], ground={"enabled": False},
                             conditions=[{"type": "force", "force": [0.3, 0, 0]}])
@@ -94,8 +94,8 @@ def test_the_particles_carry_the_volume_the_depth_prior_encloses(device):
     assert own.volumes.sum() == pytest.approx(1e-3, rel=0.05)
     assert sim.volumes.sum() == pytest.approx(prior, rel=1e-9)
     gained = sim.volumes / own.volumes
-    centre = np.array([0.0, 0.0, 0.5])
-    across, along = np.abs(sim.rest_world - centre)[:, :2].max(axis=1), np.abs(sim.rest_world[:, 2] - 0.5)
+    from_middle = np.abs(sim.rest_world - [0.0, 0.0, 0.5])
+    across, along = from_middle[:, :2].max(axis=1), from_middle[:, 2]
     np.testing.assert_array_equal(gained[(across < 0.035) & (along < 0.035)], 1.0)  # the core
     assert gained[(across < 0.035) & (along > 0.045)].mean() < 1.02  # the front and the back
     assert gained[(across > 0.045) & (along < 0.035)].mean() > 1.5  # the side walls
