@@ -468,6 +468,7 @@ class MPMSolver:
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
         self.rigid = None
+        self._pinned = None  # pin(): where substeps leave the particles
 
         nx, ny, nz = grid.shape
         # a second velocity field per node where a body can tear (crack_fields.py)
@@ -567,10 +568,18 @@ class MPMSolver:
             self._per_particle(flight, g2p)
             self.rigid.project(self, dt)
             self._per_particle(stress)
+        if self._pinned is not None:
+            wp.copy(self.x, self._pinned)
 
     def hold_yield(self, held: bool) -> None:
         """With `held`, the solids that yield or break (constitutive.YIELDING_SOLIDS) respond elastically only."""
         self.materials = self._elastic if held else self._yielding
+
+    def pin(self, pinned: bool) -> None:
+        """With `pinned`, substeps leave every particle where it is now: velocities, C, F and stress evolve as
+        usual, positions do not, so the grid's forces are those of this one configuration (the settle solves
+        the equilibrium of the photographed geometry, rest_state.py)."""
+        self._pinned = wp.clone(self.x) if pinned else None
 
     def attach_rigid(self, rigid) -> None:
         """Let a rigid.RigidBodies move its members after G2P; they meet the ground as whole bodies."""

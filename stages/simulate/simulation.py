@@ -292,10 +292,10 @@ class Simulation:
         """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
 
         The bodies that touch the ground or are held by a `fixed` condition at t = 0 sink into
-        their own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation); all
-        others are held still meanwhile (they are in flight and carry no load). Then every
-        particle goes back to its rest position and rest, keeping the elastic F and history of
-        the settled bodies.
+        their own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation), every
+        particle pinned at its rest position; all others are held still meanwhile (they are in
+        flight and carry no load). Then every particle is at rest, keeping the elastic F and
+        history of the settled bodies.
         """
         s = self.solver
         rest_sim = self.rest_world @ self.Q.T
@@ -315,15 +315,17 @@ class Simulation:
         s.prescribed_velocity.zero_()
         dt = self._cfl_substep(0.0)  # even under a physics.dt: a dt that blows up is the run's to report
         s.hold_yield(True)  # the photographed solid stands on its elastic stress; where that is past yield, the run yields
+        s.pin(True)
         relaxation = rest_state.Relaxation(self.masses)
         started, steps = time.perf_counter(), 0
         while steps * dt < rest_state.SETTLE_PERIODS * period:
             s.substep(dt)
             steps += 1
-            if relaxation.step(s):
+            if relaxation.step(s, dt):
                 break
+        s.pin(False)
         s.hold_yield(False)
-        settled = s.x.numpy().astype(np.float64)
+        settled = rest_sim + relaxation.displacement  # the deflection the pinned particles were kept from
         sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
         settled_F = s.F.numpy().astype(np.float64)
         for k in deformable:
@@ -331,11 +333,11 @@ class Simulation:
         if relaxation.residual >= rest_state.RELAXED:
             for k, h in zip(deformable, heights):
                 self._warn_unsettled(k, h, rest_sim[self.object_id == k], settled[self.object_id == k], steps * dt)
-        s.reset(rest_sim, keep=np.isin(self.object_id, deformable))  # rigid bodies were held: they did not move
+        s.reset(rest_sim, keep=np.isin(self.object_id, deformable))
         self._rest_F_inverse = np.linalg.inv(s.F.numpy().astype(np.float64))
         elapsed = time.perf_counter() - started
-        log.info("settled objects %s into their weight: %d substeps (%.3f s, %d kinetic peaks, the last %.1e of "
-                 "the first), largest sag %.2f mm, taken as the photographed shape's load (%.0f s)", deformable,
+        log.info("settled objects %s into their weight in the photographed shape: %d substeps (%.3f s, %d kinetic "
+                 "peaks, the last %.1e of the first), a sag of up to %.2f mm held up (%.0f s)", deformable,
                  steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, elapsed)
         log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
                  self._substeps_at_rest * elapsed / steps, self._substeps_at_rest, 1e3 * elapsed / steps)
