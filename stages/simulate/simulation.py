@@ -367,8 +367,9 @@ class Simulation:
         turn = rest_state.turn_deg(rest, settled, self.masses[self.object_id == k])
         sag = float(np.max(rest[:, 1] - settled[:, 1]))
         column = rest_state.column_sag(material, height, float(np.linalg.norm(self.gravity_world)))
-        log.warning("object %d (%s, E = %.3g Pa) did not come to rest under its own weight in %.2f s: it sagged "
-                    "%.1f mm and turned %.1f degrees, where an elastic column of its %.0f mm height sags %.2f mm. "
+        log.warning("object %d (%s, E = %.3g Pa) did not come to rest under its own weight in %.2f s: held in its "
+                    "photographed shape it was still giving way, %.1f mm of sag and %.1f degrees of turn so far, "
+                    "where an elastic column of its %.0f mm height sags %.2f mm. "
                     "As photographed it may not stand: in the run it will go on sagging, buckle or tip over. A "
                     "stiffer material (objects[%d].material.youngs_modulus%s), a smaller size_m or preset rigid "
                     "holds it up", k, material.preset, material.youngs_modulus, seconds, 1e3 * sag, turn,
