@@ -291,11 +291,11 @@ class Simulation:
     def settle(self) -> None:
         """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
 
-        The bodies that touch the ground or are held by a `fixed` condition at t = 0 sink into
-        their own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation), every
-        particle pinned at its rest position; all others are held still meanwhile (they are in
-        flight and carry no load). Then every particle is at rest, keeping the elastic F and
-        history of the settled bodies.
+        The bodies that touch the ground or are held by a `fixed` condition at t = 0 take up their
+        own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation), every
+        particle pinned at its rest position while its velocity and F evolve; all others are held
+        still meanwhile (they are in flight and carry no load). Then every particle is at rest,
+        keeping the elastic F and history of the settled bodies.
         """
         s = self.solver
         rest_sim = self.rest_world @ self.Q.T
