@@ -1,12 +1,15 @@
 """Speed of the diffusion backend: one UNet + 2 ControlNet call, inversion and sampling per frame.
 
-    python benchmarks/diffusion.py            # the tiny test model on this machine's CPU
-    python benchmarks/diffusion.py --full     # SD 2.1's full-size UNet and ControlNets, random weights, 768 px
+    python -m benchmarks.diffusion            # the tiny test model on this machine's CPU
+    python -m benchmarks.diffusion --full     # SD 2.1's full-size UNet and ControlNets, random weights, 768 px
 
 Per frame, the pipeline makes `inversion steps` batch-1 calls (pm-invert) and
 `steps * (1 + 1/window)` batch-3 calls (pm-enhance: every frame in the propagation
 pass, the keyframes once more in the keyframe pass). --full on a CPU measures one call
 and prints the estimate instead of running for hours (add --force to run anyway).
+
+The run's row goes to benchmarks/results/diffusion.json (diffusion_cuda.json on a GPU), replacing the
+row of the same model, image and threads, and RESULTS.md is regenerated.
 """
 from __future__ import annotations
 
@@ -19,6 +22,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks.figures import add_arguments, invocation, write_figures  # noqa: E402
 from schemas.diffusion import DiffusionSettings  # noqa: E402
 from stages.enhance.diffusion.components import Components  # noqa: E402
 from stages.enhance.diffusion.inversion import inverse_scheduler, invert_video, stored_timesteps  # noqa: E402
@@ -70,6 +74,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=10, help="sampling = inversion steps of the video run")
     parser.add_argument("--force", action="store_true", help="run --full on a CPU anyway")
     parser.add_argument("--threads", type=int, default=torch.get_num_threads(), help="CPU threads")
+    add_arguments(parser)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
 
@@ -104,6 +109,29 @@ def main() -> None:
     width = max(len(k) for k, _ in rows)
     for key, value in rows:
         print(f"| {key:<{width}} | {value} |")
+    if args.no_figures:
+        return
+    cpu = args.device == "cpu"
+    values = dict(rows)
+    estimated = "estimate per frame (paper settings)" in values
+    model_name = (f"SD 2.1 full-size UNet + 2 ControlNets (random, {str(model.dtype).replace('torch.float', 'fp')})"
+                  if args.full else "tiny SD-2.1-shaped (random)")
+    write_figures(
+        "diffusion" if cpu else "diffusion_cuda", f"Diffusion backend on {'the CPU' if cpu else 'CUDA'}",
+        f"""Time of one UNet + two-ControlNet call (batch 1: inversion; batch 3: the coarse, enhanced and
+        unconditional branches of one frame) and, per frame of a {args.frames}-frame video, of the diffusion
+        backend's inversion and of its sampling and decoding with {args.steps} steps, scaled to the paper's
+        50 + 50 steps. Per frame the pipeline makes 50 batch-1 calls (inversion, stride 20 over 1000
+        timesteps) and 50 x (1 + 1/5) batch-3 calls (every frame in the propagation pass, the keyframes
+        again in the keyframe pass).""",
+        invocation(__file__),
+        ["model", "image", "threads", "call, batch 1", "call, batch 3", f"inversion / frame ({args.steps} steps)",
+         f"sampling + decode / frame ({args.steps} steps)", "per frame, paper settings (50 + 50 steps)"],
+        [[model_name, f"{size} px", torch.get_num_threads() if cpu else "-", f"{call1:.3f} s",
+          "not run" if estimated else f"{call3:.3f} s", "-" if estimated else f"{invert_s:.3f} s",
+          "-" if estimated else f"{sample_s:.3f} s",
+          values["estimate per frame (paper settings)"] if estimated else f"{(invert_s + sample_s) * scale:.2f} s"]],
+        device=args.device, merge_on=3)
 
 
 if __name__ == "__main__":

@@ -3,7 +3,7 @@ jelly and as fracture (which adds the crack fields' passes, stages/simulate/crac
 the same scene simulated as jelly and as rigid (substeps and seconds); and a 1 s fall with the ground
 off (the centre of mass against g t^2 / 2).
 
-    PYTHONPATH=. python benchmarks/mpm.py [--device cpu] [--steps 40] [--repeats 3]
+    python -m benchmarks.mpm [--device cpu] [--steps 40] [--repeats 3] [--no-figures]
 
 The cube is a lattice of 2x2x2 particles per cell (fixed-corotated jelly,
 E = 2e5 Pa) in a 1 m domain of 64^3 cells, falling under gravity onto a
@@ -12,20 +12,28 @@ substeps after a warm-up, once with one CPU thread and once with the default
 (two on a 2-core CPU). The second table tosses a 10 cm cube (Gaussians 5 mm apart on its faces, the
 fill at 8 particles per cell of a 48-cell grid) 1 m/s up from friction ground for 1 s, as jelly
 (E = 5e4 Pa) and as rigid: a rigid body has no elastic wave to bound its substep.
+
+Each table goes to benchmarks/results/mpm*.json (``_cuda`` appended on a GPU), and RESULTS.md is regenerated.
 """
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import warp as wp
 
-from schemas.materials import Fracture, Jelly, Rigid
-from schemas.scene import PhysicsConfig
-from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver
-from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import boxes
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, before benchmarks/splat.py
+
+from benchmarks.figures import add_arguments, invocation, write_figures  # noqa: E402
+from schemas.materials import Fracture, Jelly, Rigid  # noqa: E402
+from schemas.scene import PhysicsConfig  # noqa: E402
+from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver  # noqa: E402
+from stages.simulate.simulation import Simulation  # noqa: E402
+from stages.simulate.synthetic import boxes  # noqa: E402
+
 
 GRID = 64
 
@@ -62,23 +70,34 @@ def time_substep(material, n_particles: int, threads: int | None, device: str, s
     return len(x), used, best
 
 
-def rigid_against_jelly(device: str) -> None:
-    """Print substeps and seconds of the tossed cube as jelly and as rigid."""
+def print_table(columns: list[str], rows: list[list]) -> None:
+    print("| " + " | ".join(columns) + " |")
+    print("| " + " | ".join("---" for _ in columns) + " |")
+    for row in rows:
+        print("| " + " | ".join(str(c) for c in row) + " |", flush=True)
+
+
+RIGID_COLUMNS = ["preset", "particles", "substeps in 1 s", "seconds"]
+FALL_COLUMNS = ["fall", "frames", "largest error / (g t^2 / 2)", "at t", "error at 1 s", "grid cells moved"]
+
+
+def rigid_against_jelly(device: str) -> list[list]:
+    """Rows of substeps and seconds of the tossed cube as jelly and as rigid."""
     means, object_id = boxes(((0.0, 0.0, 0.4), (0.1, 0.1, 0.5)), spacing=0.005)
     physics = PhysicsConfig(duration_s=1.0, fps=24, grid=48, ground={"type": "friction", "friction": 0.5},
                             conditions=[{"type": "impulse", "velocity": [0.0, -1.0, 0.0]}])
-    print("| preset | particles | substeps in 1 s | seconds |")
-    print("| --- | --- | --- | --- |")
+    rows = []
     for material in (Jelly(youngs_modulus=5e4), Rigid()):
         start = time.perf_counter()
         sim = Simulation(physics, [material], means, object_id, device=device)
         trajectories = sim.run()
-        print(f"| {material.preset} | {len(sim.masses)} | {int(trajectories.substeps.sum())} | "
-              f"{time.perf_counter() - start:.1f} |", flush=True)
+        label = "jelly (E = 5e4 Pa)" if material.preset == "jelly" else material.preset
+        rows.append([label, len(sim.masses), int(trajectories.substeps.sum()), f"{time.perf_counter() - start:.1f}"])
+    return rows
 
 
-def free_fall(device: str) -> None:
-    """Print the largest error of the cube's centre of mass against g t^2 / 2 over a 1 s fall, ground off."""
+def free_fall(device: str) -> list[list]:
+    """The row of the largest error of the cube's centre of mass against g t^2 / 2 over a 1 s fall, ground off."""
     means, object_id = boxes(((0.0, 0.0, 0.4), (0.1, 0.1, 0.5)), spacing=0.005)
     physics = PhysicsConfig(duration_s=1.0, fps=24, grid=48, ground={"enabled": False})
     sim = Simulation(physics, [Jelly()], means, object_id, device=device)
@@ -87,11 +106,9 @@ def free_fall(device: str) -> None:
     drop = com[1:, 1] - com[0, 1]
     expected = 0.5 * 9.81 * trajectories.time_s[1:] ** 2
     error = np.abs(drop - expected) / expected
-    print("| fall | frames | largest error / (g t^2 / 2) | at t | error at 1 s | grid cells moved |")
-    print("| --- | --- | --- | --- | --- | --- |")
     moved = (np.asarray(sim.solver.grid.origin) - np.asarray(sim.grid.origin)) / sim.grid.dx
-    print(f"| {drop[-1]:.3f} m | {len(drop)} | {100 * error.max():.2f} % | {trajectories.time_s[1 + error.argmax()]:.3f} s | "
-          f"{100 * error[-1]:.3f} % | {np.round(moved).astype(int).tolist()} |")
+    return [[f"{drop[-1]:.3f} m", len(drop), f"{100 * error.max():.2f} %", f"{trajectories.time_s[1 + error.argmax()]:.3f} s",
+             f"{100 * error[-1]:.3f} %", str(np.round(moved).astype(int).tolist())]]
 
 
 def main() -> None:
@@ -99,22 +116,54 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=3)
+    add_arguments(parser)
     args = parser.parse_args()
     wp.config.quiet = True
     wp.init()
     cpu = wp.get_device(args.device).is_cpu
-    print("| material | particles | grid | threads | ms / substep | million particle-substeps / s |")
-    print("| --- | --- | --- | --- | --- | --- |")
+    columns = ["material", "particles", "grid", "threads" if cpu else "device", "ms / substep",
+               "million particle-substeps / s"]
+    print("| " + " | ".join(columns) + " |")
+    print("| " + " | ".join("---" for _ in columns) + " |")
+    rows = []
     for material in (Jelly(youngs_modulus=2e5), Fracture(youngs_modulus=2e5)):
         for n in (30_000, 100_000):
             for threads in ((1, None) if cpu else (None,)):
                 count, used, seconds = time_substep(material, n, threads, args.device, args.steps, args.repeats)
-                print(f"| {material.preset} | {count} | {GRID}^3 | {used if cpu else args.device} | "
-                      f"{1e3 * seconds:.2f} | {count / seconds / 1e6:.2f} |", flush=True)
+                rows.append([material.preset, count, f"{GRID}^3", used if cpu else args.device,
+                             f"{1e3 * seconds:.2f}", f"{count / seconds / 1e6:.2f}"])
+                print("| " + " | ".join(str(c) for c in rows[-1]) + " |", flush=True)
     print()
-    rigid_against_jelly(args.device)
+    rigid = rigid_against_jelly(args.device)
+    print_table(RIGID_COLUMNS, rigid)
     print()
-    free_fall(args.device)
+    fall = free_fall(args.device)
+    print_table(FALL_COLUMNS, fall)
+    if args.no_figures:
+        return
+    suffix, command = "" if cpu else "_cuda", invocation(__file__)
+    on = "" if cpu else " on CUDA"
+    write_figures(
+        "mpm" + suffix, "MLS-MPM substep" + on,
+        f"""Time of one MLS-MPM substep (P2G, the grid update over the particles' node box, G2P, the return
+        mapping and stress) for a cube of 2x2x2 particles per cell (E = 2e5 Pa) falling onto sticky ground in
+        a 1 m domain of {GRID}^3 cells, as jelly and as fracture, whose substep adds the crack fields' passes
+        (stages/simulate/crack_fields.py: the damage to the grid, the damage gradient, each node's crack
+        direction, then two fields through P2G, the grid update and G2P). Best of {args.repeats} runs of
+        {args.steps} substeps after a warm-up{', on one CPU thread and on the default two' if cpu else ''}.""",
+        command, columns, rows, device=args.device,
+        notes=["Target: 2.5 million particle-substeps/s at 30k particles (PhysGaussian's Warp MPM about 1.0 "
+               "million, single-threaded Taichi MLS-MPM about 1.3 million on the 2-core CPU)."])
+    write_figures(
+        "mpm_rigid" + suffix, "Rigid against jelly" + on,
+        """A 10 cm cube (Gaussians 5 mm apart on its faces, the fill at 8 particles per cell of a 48-cell grid)
+        tossed 1 m/s up from friction ground for 1 s, as jelly (E = 5e4 Pa) and as rigid: substeps and wall
+        seconds of the whole simulation.""", command, RIGID_COLUMNS, rigid, device=args.device)
+    write_figures(
+        "mpm_fall" + suffix, "A 1 s fall" + on,
+        """A 10 cm cube (Gaussians 5 mm apart on its faces, the fill at 8 particles per cell of a 48-cell grid)
+        falling for 1 s with the ground off: its centre of mass against g t^2 / 2 over 24 frames, and how far
+        the grid that follows the bodies moved.""", command, FALL_COLUMNS, fall, device=args.device)
 
 
 if __name__ == "__main__":

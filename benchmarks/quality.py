@@ -1,7 +1,8 @@
-"""Quality of physmotion's results, printed as tables (recorded in benchmarks/RESULTS.md).
+"""Quality of physmotion's results, printed as tables and written to benchmarks/results/<section>.json
+(RESULTS.md is regenerated from them).
 
 One function per section; run all or one:
-    python benchmarks/quality.py [--section reconstruct|enhance] [--device cpu] [--results results/]
+    python -m benchmarks.quality [--section reconstruct|enhance] [--device cpu] [--results results/] [--no-figures]
 
 reconstruct: for every example scene, the default pm-reconstruct settings:
   masked PSNR of the input-view render against the photograph (at the
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import shlex
 import sys
 import tempfile
 import time
@@ -31,6 +33,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import splat  # noqa: E402
+from benchmarks.figures import add_arguments, write_figures  # noqa: E402
 from schemas import load_scene  # noqa: E402
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, read_artifact  # noqa: E402
 from schemas.video import read_video  # noqa: E402
@@ -65,15 +68,17 @@ def _reconstruct(scene_file: Path, device: str, hard_depth: bool = True):
     return scene, gaussians, view, render, psnr, seconds
 
 
-def reconstruction_section(device: str) -> str:
-    """The table of section '## reconstruct' of RESULTS.md."""
-    rows = ["| scene | Gaussians | masked PSNR (dB) | runtime (s) | depth median rel. error | side IoU "
-            "| floater mass | median distance to surface |",
-            "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+RECONSTRUCT_COLUMNS = ["scene", "Gaussians", "masked PSNR (dB)", "runtime (s)", "depth median rel. error", "side IoU",
+                       "floater mass", "median distance to surface"]
+
+
+def reconstruction_section(device: str) -> list[list]:
+    """The rows of the reconstruction table (RECONSTRUCT_COLUMNS)."""
+    rows = []
     for scene_file in sorted(ROOT.glob("scenes/*/scene.yaml")):
         scene, g, view, _, psnr, seconds = _reconstruct(scene_file, device)
-        rows.append(f"| {scene_file.parent.name} ({view.camera.width}x{view.camera.height}, "
-                    f"{scene.reconstruct.iterations} it) | {len(g)} | {psnr:.2f} | {seconds:.0f} | | | | |")
+        rows.append([f"{scene_file.parent.name} ({view.camera.width}x{view.camera.height}, "
+                     f"{scene.reconstruct.iterations} it)", len(g), f"{psnr:.2f}", f"{seconds:.0f}", "", "", "", ""])
     capsule = Capsule.tilted()
     with tempfile.TemporaryDirectory() as tmp:
         scene_file = write_scene(Path(tmp), capsule)
@@ -89,12 +94,12 @@ def reconstruction_section(device: str) -> str:
             side_iou = iou(_render(g, side, device).alpha.cpu().numpy() > 0.5, side_truth.mask)
             distance = np.abs(capsule.signed_distance(g.means))
             floaters = g.opacities[distance > 0.02 * capsule.size_m].sum()
-            rows.append(f"| capsule, hard depth {'on' if hard_depth else 'off'} ({camera.width}x{camera.height}, "
-                        f"{scene.reconstruct.iterations} it) | {len(g)} | {psnr:.2f} | {seconds:.0f} | "
-                        f"{100 * depth_error:.2f} % | {side_iou:.3f} | {floaters:.1f} "
-                        f"({100 * floaters / g.opacities.sum():.2f} % of all opacity) | "
-                        f"{1000 * np.median(distance):.1f} mm |")
-    return "\n".join(rows)
+            rows.append([f"capsule, hard depth {'on' if hard_depth else 'off'} ({camera.width}x{camera.height}, "
+                         f"{scene.reconstruct.iterations} it)", len(g), f"{psnr:.2f}", f"{seconds:.0f}",
+                         f"{100 * depth_error:.2f} %", f"{side_iou:.3f}",
+                         f"{floaters:.1f} ({100 * floaters / g.opacities.sum():.2f} % of all opacity)",
+                         f"{1000 * np.median(distance):.1f} mm"])
+    return rows
 
 
 def _inside(mask: np.ndarray) -> np.ndarray:
@@ -129,7 +134,12 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
     return float(10 * np.log10(255.0 ** 2 / max(mse, 1e-12)))
 
 
-def enhancement_section(results: Path) -> str:
+ENHANCE_COLUMNS = ["scene", "frames", "frame-0 PSNR enhanced dB", "decoded video dB", "coarse dB",
+                   "sharpness ratio min / mean / max (1st s)", "last 1/2 s", "moved photograph's",
+                   "photograph shifted 1/4, 1/2 px", "area scale", "flicker (/255)"]
+
+
+def enhancement_section(results: Path) -> list[list]:
     """Flow enhancement on each example scene's workflow results (run `make demo` first).
 
     frame-0 PSNR against the photograph at the output size, whole frame: of the enhancer's
@@ -149,14 +159,11 @@ def enhancement_section(results: Path) -> str:
     image shrank, which raises the measure by about its square); flicker: mean absolute change between
     consecutive decoded frames of the pixels no frame's object ever covers.
     """
-    rows = ["| scene | frames | frame-0 PSNR enhanced dB | decoded video dB | coarse dB "
-            "| sharpness ratio min / mean / max (1st s) | last 1/2 s | moved photograph's "
-            "| photograph shifted 1/4, 1/2 px | area scale | flicker (/255) |",
-            "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    rows = []
     for scene_file in sorted((ROOT / "scenes").glob("*/scene.yaml")):
         name, folder = scene_file.parent.name, results / scene_file.parent.name
         if not (folder / "video.mp4").exists():
-            rows.append(f"| {name} | missing: run `make demo` first | | | | | | | | | |")
+            rows.append([name, "missing: run `make demo` first", *[""] * (len(ENHANCE_COLUMNS) - 2)])
             continue
         scene = load_scene(scene_file)
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
@@ -184,17 +191,46 @@ def enhancement_section(results: Path) -> str:
             area.append(_area_scale(uv, coarse.alpha[t] > 0.5))
         never_covered = (coarse.alpha < 1.0 / 255).all(axis=0)
         flicker = np.abs(np.diff(video.astype(np.int16), axis=0))[:, never_covered].mean()
-        rows.append(f"| {name} | {len(video)} | {_psnr(enhanced[0], photo):.1f} | {_psnr(video[0], photo):.1f} "
-                    f"| {_psnr(coarse_blend, photo):.1f} | {min(ratios):.2f} / {np.mean(ratios):.2f} / {max(ratios):.2f} "
-                    f"| {settled:.2f} | {min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f} | "
-                    + ", ".join(f"{_variance_of_laplacian(_shifted(fine_photo, d), photo_mask) / photo_sharpness:.2f}"
-                                for d in (0.25, 0.5)) + f" | {min(area):.2f}-{max(area):.2f} | {flicker:.2f} |")
-    return "\n".join(rows)
+        shifted = ", ".join(f"{_variance_of_laplacian(_shifted(fine_photo, d), photo_mask) / photo_sharpness:.2f}"
+                            for d in (0.25, 0.5))
+        rows.append([name, len(video), f"{_psnr(enhanced[0], photo):.1f}", f"{_psnr(video[0], photo):.1f}",
+                     f"{_psnr(coarse_blend, photo):.1f}",
+                     f"{min(ratios):.2f} / {np.mean(ratios):.2f} / {max(ratios):.2f}", f"{settled:.2f}",
+                     f"{min(moved):.2f} / {np.mean(moved):.2f} / {max(moved):.2f}", shifted,
+                     f"{min(area):.2f}-{max(area):.2f}", f"{flicker:.2f}"])
+    return rows
 
 
 SECTIONS = {
-    "reconstruct": lambda args: reconstruction_section(args.device),
-    "enhance": lambda args: enhancement_section(args.results),
+    "reconstruct": (lambda args: reconstruction_section(args.device), RECONSTRUCT_COLUMNS, "Reconstruction quality",
+                    """pm-reconstruct with each example scene's default settings (600 iterations at 256 px on the
+                    longest side, the inflation depth prior, hard depth on, at most 30000 initial Gaussians): the
+                    masked PSNR of the input-view render against the photograph's foreground (premultiplied by the
+                    mask's coverage, at the optimisation resolution, over the object's pixels) and the runtime from
+                    segmentation to the optimised Gaussians, file not written. On a synthetic capsule (0.25 m long,
+                    0.05 m radius, tilted 20 degrees in the image plane, 0.6 m away, ray-cast by
+                    stages/reconstruct/synthetic.py), with hard depth on and off: the median relative error of the
+                    rendered depth (depth / alpha where alpha > 0.5) against the ray-cast distance, the IoU of the
+                    side view's silhouette (alpha > 0.5 from azimuth 90 degrees) against the true one, the floater
+                    mass (summed opacity of Gaussians farther than 2 % of size_m from the true surface) and the
+                    median distance of the means to the surface.""",
+                    ["Targets: masked PSNR 30 dB; runtime under 5 minutes for a 256-pixel image; depth error 5 % "
+                     "and side IoU 0.8 on the capsule."]),
+    "enhance": (lambda args: enhancement_section(args.results), ENHANCE_COLUMNS, "Flow enhancement",
+                """The flow backend on the example scenes' workflow results (1 s of video at 24 fps, at each
+                scene's render width). Frame-0 PSNR against the photograph, whole frame at the output size: of
+                the enhancer's frame before encoding, of the decoded video.mp4 and of the coarse render blended
+                over the inpainted background. Sharpness: the variance of the Laplacian inside the object
+                (rendered alpha > 0.5, its 3 px silhouette left out) as a ratio to the photograph's, min / mean /
+                max over the first second and its mean over the last half second; beside it the same ratio for
+                the moved photograph (the photograph read at source_uv over the whole object, no render
+                fallback: the most detail the backend can keep), and for scale the photograph itself shifted by a
+                quarter and by half a pixel by the backend's lookup. Area scale: the range of the source map's
+                median photograph pixels per frame pixel (a surface whose image shrinks by s raises the measure
+                by about 1/s^4). Flicker: the mean absolute change between consecutive decoded frames of the
+                pixels no frame's object ever covers.""",
+                ["Targets: frame-0 PSNR 35 dB, sharpness within 20 % of the photograph's, flicker at most "
+                 "0.5/255."]),
 }
 
 
@@ -205,12 +241,21 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
     parser.add_argument("--results", type=Path, default=ROOT / "results",
                         help="the workflow's results folder, for the enhance section (default: results/)")
+    add_arguments(parser)
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", datefmt="%H:%M:%S")
     if args.device == "cpu":
         torch.set_num_threads(1)  # as pm-reconstruct: splat's threads already use the cores
     for name in args.section or sorted(SECTIONS):
-        print(f"## {name}\n\n{SECTIONS[name](args)}\n", flush=True)
+        measure, columns, title, description, notes = SECTIONS[name]
+        rows = measure(args)
+        table = ["| " + " | ".join(columns) + " |", "| " + " | ".join("---" for _ in columns) + " |",
+                 *("| " + " | ".join(str(c) for c in row) + " |" for row in rows)]
+        print(f"## {name}\n\n" + "\n".join(table) + "\n", flush=True)
+        if not args.no_figures:
+            command = shlex.join(["python", "-m", "benchmarks.quality", "--section", name,
+                                  *(["--device", args.device] if args.device != "cpu" else [])])
+            write_figures(name, title, description, command, columns, rows, notes=notes, device=args.device)
 
 
 if __name__ == "__main__":

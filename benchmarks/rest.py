@@ -1,6 +1,6 @@
 """Rest drift: a photographed object with no conditions must stay where it stands.
 
-    PYTHONPATH=. python benchmarks/rest.py results/ball results/coffee ... [--presets jelly rigid ...]
+    python -m benchmarks.rest results/ball results/coffee ... [--presets jelly rigid ...] [--no-figures]
 
 Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
 scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
@@ -10,21 +10,28 @@ defaults; `scene`: the scene's own materials). Printed per run: the largest turn
 over the run (degrees, best rigid fit of all particles), the largest
 horizontal travel of its centre of mass (mm and % of size_m), the largest
 sag of the centre of mass (mm), substeps and seconds.
+
+The rows go to benchmarks/results/rest.json, replacing those of the same scene and preset and keeping
+the others (each row names its commit), and RESULTS.md is regenerated.
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from schemas import load_scene
-from schemas import materials as M
-from schemas.artifacts import GaussiansArtifact, read_artifact
-from stages.simulate.rest_state import turn_deg
-from stages.simulate.simulation import Simulation
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, before benchmarks/splat.py
+
+from benchmarks.figures import add_arguments, invocation, write_figures  # noqa: E402
+from schemas import load_scene  # noqa: E402
+from schemas import materials as M  # noqa: E402
+from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
+from stages.simulate.rest_state import turn_deg  # noqa: E402
+from stages.simulate.simulation import Simulation  # noqa: E402
 
 PRESET_MODELS = {"jelly": M.Jelly, "metal": M.Metal, "sand": M.Sand, "plasticine": M.Plasticine, "foam": M.Foam,
                  "snow": M.Snow, "rigid": M.Rigid, "fracture": M.Fracture}
@@ -47,10 +54,13 @@ def main() -> None:
     parser.add_argument("--presets", nargs="+", default=["jelly", "metal", "rigid", "plasticine", "foam",
                                                          "fracture", "sand", "snow"])
     parser.add_argument("--duration", type=float, default=None, help="seconds (default: the scene's)")
+    add_arguments(parser)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    print("| scene | preset | turn (deg) | travel (mm) | travel (% size) | sag (mm) | substeps | s |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+    columns = ["scene", "preset", "turn (deg)", "travel (mm)", "travel (% size)", "sag (mm)", "substeps", "s"]
+    print("| " + " | ".join(columns) + " |")
+    print("| " + " | ".join("---" for _ in columns) + " |")
+    rows = []
     for folder in args.results:
         scene = load_scene(args.scenes_dir / folder.name / "scene.yaml")
         g = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
@@ -68,9 +78,25 @@ def main() -> None:
             r = drift(sim, tr)
             label = preset if preset != "scene" else "scene's: " + ", ".join(
                 f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
-            print(f"| {folder.name} | {label} | {r['turn']:.2f} | {1e3 * r['travel']:.2f} | "
-                  f"{100 * r['travel'] / size:.2f} | {1e3 * r['sag']:.2f} | {r['substeps']} | "
-                  f"{time.perf_counter() - start:.0f} |", flush=True)
+            rows.append([folder.name, label, f"{r['turn']:.2f}", f"{1e3 * r['travel']:.2f}",
+                         f"{100 * r['travel'] / size:.2f}", f"{1e3 * r['sag']:.2f}", r["substeps"],
+                         f"{time.perf_counter() - start:.0f}"])
+            print("| " + " | ".join(str(c) for c in rows[-1]) + " |", flush=True)
+    if not args.no_figures:
+        write_figures(
+            "rest", "Rest drift",
+            """A photographed object with no conditions must stay where it stands. Each reconstruction is
+            simulated for its scene's duration with every condition removed, as each preset with the preset's
+            defaults (`scene's`: the scene's own material): the largest turn of the body (best rigid fit of all
+            particles), the largest travel of its centre of mass along the ground (mm and % of size_m), the
+            largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball,
+            coffee and logo are the example scenes; rocket, motorcycle and loaf are the photographs of
+            benchmarks/scenes (made by `python benchmarks/scenes/make_photos.py`, reconstructed by
+            `pm-reconstruct --scene benchmarks/scenes/NAME/scene.yaml --out results/NAME/gaussians.h5` and
+            measured with `--scenes-dir benchmarks/scenes`); shuttle is the model shuttle stack at the right of
+            scikit-image's astronaut photograph as a new user writes it (box [350, 0, 476, 292], 0.45 m, a hint
+            image).""",
+            invocation(__file__), columns, rows, merge_on=2)
 
 
 if __name__ == "__main__":
