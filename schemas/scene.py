@@ -444,7 +444,7 @@ def stage_keys(scene: Scene, stage: str) -> dict:
     """
     data = _relative_paths(scene.model_dump(mode="json"), str(scene.folder))
     if stage == "reconstruct":
-        # hints only where given, so scenes without them keep the hashes of their earlier results
+        # hints only where given: a scene without hints hashes as if the key did not exist, so its results stay current
         objs = [{k: o[k] for k in ("mask", "box", "size_m")} | ({"hints": o["hints"]} if o["hints"] else {})
                 for o in data["objects"]]
         return {"image": data["image"], "camera": data["camera"], "objects": objs, "reconstruct": data["reconstruct"]}

@@ -25,11 +25,11 @@ M_PERTURB, PERTURB_BYTE = -6, 0x5A
 def filled_allocations():
     """While in the block, every block malloc returns is filled with PERTURB_BYTE (glibc's M_PERTURB).
 
-    The encoding path (libx264 through libavcodec) reads memory it never wrote: the bytes of a video
-    followed what the process had freed before (the same frames encoded after a render, or after
-    other allocations, came out different: pm-render's coarse.mp4 differed between two runs of the
-    same inputs in one of three). Filled, they are the same whatever ran before. Without glibc's
-    mallopt nothing changes."""
+    The encoding path (libx264 through libavcodec) reads memory it never wrote, so unfilled, the bytes
+    of a video follow what the process freed earlier (the same frames encoded after a render, or after
+    other allocations, come out different: pm-render's coarse.mp4 differs between two runs of the same
+    inputs in one of three). Filled, they are the same whatever ran first. Without glibc's mallopt
+    nothing changes."""
     mallopt = getattr(ctypes.CDLL(None), "mallopt", None)
     if mallopt is None:
         yield
@@ -68,8 +68,8 @@ def write_video(path: Path | str, frames: np.ndarray, fps: float, crf: int = 14)
         stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
         stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
         # x264 splits the work by its thread count, and its output depends on that count: left to x264
-        # ("auto", from the CPUs this process may use) two runs on the same frames differed by up to 38/255
-        # when one was pinned to one core. A fixed count gives the same bytes wherever it runs.
+        # ("auto", from the CPUs this process may use) two runs on the same frames differ by up to 38/255
+        # when one is pinned to one core. A fixed count gives the same bytes wherever it runs.
         stream.options = {"crf": str(crf), "threads": str(X264_THREADS)}
         for rgb in frames[:, :height, :width]:
             container.mux(stream.encode(av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")))

@@ -45,5 +45,5 @@ torch_single_threaded = _TorchThreads().single
 splat's torch ops are small gathers, sorts and sums; its CPU time goes to Warp
 kernels launched from several Python threads. Torch's OpenMP workers spin-wait
 after each parallel op and take the cores from those threads: on 2 cores a
-render plus backward took 3-5x the CPU time with them.
+render plus backward takes 3-5x the CPU time with them.
 """

@@ -38,7 +38,7 @@ FLOOR = 0.15
 """Shading is never taken below this fraction of its brightest (ambient + |light|): near the
 terminator the photograph holds little but noise and a small error in the normal moves the
 terminator, so dividing by that shading must stay bounded (at 5 %, with gains up to 3, the ball
-showed bright blotches along its terminator)."""
+shows bright blotches along its terminator)."""
 MAX_GAIN = 2.5
 """Shading ratios are clipped to [1/MAX_GAIN, MAX_GAIN]."""
 

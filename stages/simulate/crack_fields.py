@@ -12,9 +12,9 @@ there), field 1 where it points against it. The particles on either side of the 
 material there (crack_contact): undamaged they move as one field would, and they move apart
 freely as the damage near the node goes to 1, so the material's toughness still sets how far it
 stretches before it tears; where they approach, they meet (frictionless contact). A node with
-no damage near it has one field. (Splitting only where damage is 1, with no binding before, the
-material beside a crack kept breaking until the split came: on the torn test ball 2 % of its
-particles flew loose between the pieces, against 0.7 % so.)
+no damage near it has one field. The binding matters: split only where damage is 1, with no
+binding, the material beside a crack keeps breaking until the split comes (2 % of the torn test
+ball's particles fly loose between the pieces, 0.7 % bound; docs/decisions/0003-crack-fields.md).
 
 Per substep, before P2G (only for scenes with a fracture object):
   damage_to_grid           node damage (the mass-weighted mean) and the largest damage near the node
