@@ -83,10 +83,14 @@ class Rigid(BaseModel):
     """A body whose shape does not change: it moves as one (six degrees of freedom), so it has no
     elastic constants and no elastic wave bounds its time step."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     preset: Literal["rigid"] = "rigid"
     density: float = Field(1000.0, gt=0, description="density in kg/m^3")
+    restitution: float = Field(
+        0.0, ge=0, le=1, description="coefficient of restitution e against the ground, in [0, 1]: the speed at "
+        "which the body's contact point leaves the ground over the speed at which it struck it. 0: it lands "
+        "and stays; 1: it bounces back to the height it fell from; a ball dropped from h rebounds to e^2 h")
 
 
 class Fracture(_Elastic):

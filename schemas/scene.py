@@ -149,6 +149,10 @@ class Impulse(_Condition):
 
 
 class Velocity(_Windowed):
+    """Moves the region at a prescribed velocity during the window. On a rigid body the whole body follows it
+    (the rigid motion that best gives the region that velocity), turning freely about the region where it is
+    one point or one line of particles, as `fixed` does."""
+
     type: Literal["velocity"]
     velocity: Vec3 = Field(description="prescribed velocity of the region in m/s during the window")
 
@@ -164,6 +168,10 @@ class Torque(_Windowed):
 
 
 class Fixed(_Windowed):
+    """Holds the region still during the window. On a rigid body the region holds the whole body: held over an
+    area or a volume it cannot move; held at one point (a region with one particle) it swings about that point
+    as on a pin, and held along one line of particles it turns about that line as on a hinge."""
+
     type: Literal["fixed"]
 
 

@@ -8,7 +8,7 @@ away from the camera; domain.gravity_frame) unless the condition says
 the same frame and turned into the simulation frame. Semantics (DESIGN.md):
   impulse   v_p += dv once, at the first substep starting at or after start_s
   velocity  v_p = v during [start_s, end_s) (mpm.grid_to_particle's override)
-  fixed     v_p = 0 during the window
+  fixed     v_p = 0 during the window (a rigid body is held by those particles as a whole: rigid.py)
   force     f_p = F m_p / M_region
   torque    f_p = m_p (I^-1 tau) x (x_p - c), c and I of the region's current
             positions, so the forces sum to zero and their moment about c is tau
@@ -77,6 +77,35 @@ def add_torque_forces(members: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.ve
     force[p] = force[p] + mass[p] * wp.cross(alpha, x[p] - (ref + s))
 
 
+def inertia_about_centre(points: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(centre of mass (3,) m, inertia tensor (3,3) kg m^2 about it) of point masses (N,) kg at points (N,3) m."""
+    centre = masses @ points / masses.sum()
+    r = points - centre
+    return centre, np.eye(3) * np.sum(masses * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", masses, r, r)
+
+
+def largest_acceleration(condition, to_world: np.ndarray, region: np.ndarray, masses: np.ndarray,
+                         body: np.ndarray) -> float:
+    """The largest acceleration in m/s^2 a force or torque condition gives a particle at rest: F / M of
+    its region, or |I^-1 tau| (I the region's inertia about its centre) times the farthest particle of
+    its object from that centre, the lever of a body that turns as one; 0 for the other conditions.
+
+    Args:
+        condition: one of scene.physics.conditions.
+        to_world: (3,3) the condition's frame -> world.
+        region: (N,3) the region's rest positions, world frame, m.
+        masses: (N,) their masses, kg.
+        body: (B,3) the rest positions of the region's object, world frame, m.
+    """
+    if condition.type == "force":
+        return float(np.linalg.norm(condition.force)) / float(masses.sum())
+    if condition.type != "torque":
+        return 0.0
+    centre, inertia = inertia_about_centre(region, masses)
+    alpha = np.linalg.solve(inertia, to_world @ np.asarray(condition.torque, np.float64))
+    return float(np.linalg.norm(alpha) * np.max(np.linalg.norm(body - centre, axis=1)))
+
+
 @dataclass
 class _Active:
     condition: object
@@ -103,8 +132,12 @@ class Conditions:
         gravity_frame: (3,3) rows: the gravity-aligned axes in the world frame (domain.gravity_frame).
         scene_file: named in the error when a region holds no particle.
 
+    `acceleration` is the largest acceleration in m/s^2 a force or torque condition gives a particle
+    (largest_acceleration): the substep must follow what they set moving, as it does a fall.
+
     Raises:
-        InputError: a region that holds no particle of its object.
+        InputError: a region that holds no particle of its object, or a torque's region with no
+            extent about some axis (one point, one line of particles), which no forces on it can turn.
     """
 
     def __init__(self, conditions, rest_world: np.ndarray, object_id: np.ndarray, masses: np.ndarray,
@@ -112,6 +145,7 @@ class Conditions:
         self.device, self.n = device, len(masses)
         self.masses = masses
         self.items: list[_Active] = []
+        self.acceleration = 0.0
         for i, c in enumerate(conditions):
             to_frame = condition_frame(c, gravity_frame)  # world -> the condition's frame
             obj = np.flatnonzero(object_id == c.object)
@@ -121,6 +155,15 @@ class Conditions:
                                  f"the region holds no particle of object {c.object}",
                                  "enlarge it; regions are in the object's own [0,1]^3 box (see setup.png)")
             m = masses[idx].astype(np.float64)
+            if c.type == "torque":
+                moments = np.linalg.eigvalsh(inertia_about_centre(rest_world[idx], m)[1])
+                if moments[0] <= 1e-9 * moments[2]:  # one point or one line: no moment about some axis
+                    raise InputError(scene_file, f"physics.conditions[{i}].region",
+                                     f"the torque's region holds {len(idx)} particle(s) of object {c.object} on "
+                                     "one point or one line, which forces on them cannot turn about every axis",
+                                     "enlarge it; regions are in the object's own [0,1]^3 box (see setup.png)")
+            self.acceleration = max(self.acceleration, largest_acceleration(
+                c, to_frame.T, rest_world[idx], m, rest_world[obj]))
             centre = Q @ (m @ rest_world[idx] / m.sum())
             self.items.append(_Active(c, idx, wp.array(idx.astype(np.int32), dtype=wp.int32, device=device),
                                       float(m.sum()), wp.vec3(*centre.astype(np.float32)), Q @ to_frame.T))

@@ -102,7 +102,9 @@ def fit_grid(rest_sim: np.ndarray, cells: int, *, ground_y: float | None, walls:
     return Grid(origin=tuple(float(o) for o in origin), dx=dx, shape=tuple(int(n) for n in shape))
 
 
-def cfl_substep(dx: float, materials: list, max_speed: float) -> float:
-    """Largest stable substep in s: CFL * dx / (fastest elastic wave + fastest particle)."""
-    c = max(wave_speed(m) for m in materials)
-    return CFL * dx / (c + max_speed)
+def cfl_substep(dx: float, materials: list, max_speed: float, longest: float = math.inf) -> float:
+    """Largest stable substep in s: CFL * dx / (fastest elastic wave + fastest particle, m/s), and at most
+    `longest` s, which is all that bounds it where nothing can move (rigid bodies, no gravity, no condition:
+    no wave and no speed)."""
+    speed = max(wave_speed(m) for m in materials) + max_speed
+    return min(longest, CFL * dx / speed) if speed > 0 else longest

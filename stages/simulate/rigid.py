@@ -4,9 +4,11 @@ body as a whole.
 
 Per substep, per rigid body b with rest centre of mass, rest offsets r0_p and
 rest inertia I0 (all in the simulation frame):
-  P = sum m_p v_p,  L = sum m_p (R r0_p) x v_p          (momenta gathered from the grid)
+  P = sum m_p v_p,  L = sum m_p (R r0_p) x v_p + S     (momenta gathered from the grid; S what
+                                                        its forces added to the APIC spin in C_p)
   V = P / M,  omega = (R I0 R^T)^-1 L
   ground: an impulse at the centre of pressure (below)
+  held particles (below)
   c += dt V,  R <- exp(dt omega) R
   x_p = c + R r0_p,  v_p = V + omega x (x_p - c),  C_p = [omega]x,  F_p = R
 so the shape never changes (no strain), while contacts with other objects and
@@ -17,11 +19,24 @@ keeps their velocities from before it): zeroing the nodes under the contact
 patch puts the reaction at the patch's centroid, not under the centre of mass,
 and rocks a body that stands still. A plane's pressure on a body sums to one
 force at the centre of pressure, which lies in the support (the contact
-points' extent on the ground) as near as it can to below the centre of mass:
-there the impulse that stops the body's approach leaves a body at rest at
+points' extent on the ground) as near as it can to below the centre of mass.
+When the body's lowest point would reach its floor within the substep, the
+impulse there reverses the approach at that point to e times its speed (e the
+material's restitution; 0 stops it), and the body is moved as if it had met
+the floor at the moment it reached it and left it at the new speed; so a ball
+dropped from h rebounds to e^2 h, whatever the substep, a body at rest stays at
 rest, and one whose centre of mass is beyond its support tips over its edge.
-Friction acts at the same point by Coulomb's law (sticky: no sliding; slip:
-none), so a ball rolls.
+An approach slower than two substeps of gravity is a body resting on the
+ground, which is pressed into it every substep and does not hop. Friction acts
+at the same point by Coulomb's law (sticky: no sliding; slip: none), so a ball
+rolls.
+
+Particles held by a `fixed` or `velocity` condition (mpm's `prescribed`) hold
+the whole body: it takes the rigid motion that best gives them their
+prescribed velocities (mass-weighted least squares), and where they leave it
+free, at one point (a pin) or along one line of points (a hinge), it keeps its
+own angular momentum about their centre of mass. Held over an area or a
+volume, it follows them and nothing else moves it.
 """
 from __future__ import annotations
 
@@ -40,16 +55,37 @@ def gather_rigid_momentum(
     mass: wp.array(dtype=float),
     x: wp.array(dtype=wp.vec3),
     v: wp.array(dtype=wp.vec3),
+    C: wp.array(dtype=wp.mat33),
+    free: wp.array(dtype=wp.int32),
+    spin: wp.array(dtype=wp.vec3),
+    dx: float,
+    prescribed: wp.array(dtype=wp.int32),
     ground_y: float,
     contact_height: float,
     linear: wp.array(dtype=wp.vec3),
     angular: wp.array(dtype=wp.vec3),
     lowest: wp.array(dtype=float),
     support: wp.array2d(dtype=float),
+    held_mass: wp.array(dtype=float),
+    held_first: wp.array(dtype=wp.vec3),
+    held_second: wp.array(dtype=wp.mat33),
+    held_linear: wp.array(dtype=wp.vec3),
+    held_angular: wp.array(dtype=wp.vec3),
 ):
     """Sum each body's linear momentum (kg m/s), angular momentum about its centre (kg m^2/s), find its
     lowest point below the centre (m) and the extent of its points within contact_height of the
-    ground (support[b] = min x, min z, -max x, -max z, m)."""
+    ground (support[b] = min x, min z, -max x, -max z, m); and of its particles a condition holds
+    (prescribed, their velocity v set by G2P): mass (kg), first (kg m) and second (kg m^2) moments of
+    their offsets from the centre, linear and angular momentum.
+
+    APIC keeps part of a particle's angular momentum in its affine velocity C: m_p (dx^2 / 4) times the
+    axial vector of C_p - C_p^T (the quadratic kernel's second moment is dx^2 / 4), which for the body's
+    own spin omega (C_p = [omega]x, apply_rigid_motion) is m_p (dx^2 / 2) omega. The body takes what
+    the grid's forces and contacts added to that spin (on the particles on the grid, which carried it
+    through P2G and G2P): counting only m r x v would give it an inertia of I + M dx^2 / 2 toward the grid
+    (a torque would turn a box 16 cells across 6-15 % short of I^-1 tau), and counting the whole spin
+    would make a free spin grow every substep.
+    """
     i = wp.tid()
     p = members[i]
     b = body[i]
@@ -57,7 +93,17 @@ def gather_rigid_momentum(
     offset = wp.quat_rotate(orientation[b], rest_offset[i])
     wp.atomic_add(linear, b, momentum)
     wp.atomic_add(angular, b, wp.cross(offset, momentum))
+    if free[p] == 0:
+        c = C[p]
+        affine = wp.vec3(c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1])
+        wp.atomic_add(angular, b, (0.25 * dx * dx * mass[p]) * (affine - 2.0 * spin[b]))
     wp.atomic_min(lowest, b, offset[1])
+    if prescribed[p] != 0:
+        wp.atomic_add(held_mass, b, mass[p])
+        wp.atomic_add(held_first, b, mass[p] * offset)
+        wp.atomic_add(held_second, b, mass[p] * wp.outer(offset, offset))
+        wp.atomic_add(held_linear, b, momentum)
+        wp.atomic_add(held_angular, b, wp.cross(offset, momentum))
     if x[p][1] <= ground_y + contact_height:
         wp.atomic_min(support, b, 0, x[p][0])
         wp.atomic_min(support, b, 1, x[p][2])
@@ -77,34 +123,85 @@ def push_at(r: wp.vec3, j: wp.vec3, inv_mass: float, inv_inertia: wp.mat33, V: w
     return V + inv_mass * j, omega + inv_inertia * wp.cross(r, j)
 
 
+@wp.func
+def held_motion(total_mass: float, inertia: wp.mat33, V: wp.vec3, omega: wp.vec3, held: float, first: wp.vec3,
+                second: wp.mat33, linear: wp.vec3, angular: wp.vec3):
+    """Linear and angular velocity of a body (total_mass kg, inertia kg m^2 about its centre, its own motion
+    V m/s and omega rad/s) whose held particles (mass held kg, moments first kg m and second kg m^2 of their
+    offsets from the centre, momentum linear kg m/s and angular kg m^2/s about the centre of their
+    prescribed velocities) move as prescribed.
+
+    Their centre of mass, the pivot, moves at their mean velocity and the body turns as the best fit of
+    their angular momentum about it; about axes along which they have no extent (all of them at one point,
+    one along a line of points) that fit says nothing, and the body keeps its own angular momentum about
+    the pivot, as a pin or a hinge lets it.
+    """
+    s = first / held  # the pivot, from the centre
+    pivot_velocity = linear / held
+    spread = second - held * wp.outer(s, s)  # second moment about the pivot
+    held_inertia = wp.diag(wp.vec3(wp.trace(spread))) - spread
+    held_spin = angular - wp.cross(s, linear)  # their angular momentum about the pivot
+    # extent below 1 % of the body's radius of gyration is none (float32 leaves about 1e-7 of it)
+    none = 1.0e-4 * held * wp.trace(inertia) / total_mass
+    axes, moments = wp.eig3(held_inertia)
+    fitted = wp.vec3(0.0)
+    free = wp.mat33(0.0)  # projector onto the axes the held particles leave free
+    for k in range(3):
+        axis = wp.vec3(axes[0, k], axes[1, k], axes[2, k])
+        if moments[k] > none:
+            fitted += axis * (wp.dot(axis, held_spin) / moments[k])
+        else:
+            free += wp.outer(axis, axis)
+    # about the free axes: the rotation w closest to the body's own motion in kinetic energy, i.e. that keeps
+    # its angular momentum about the pivot (P I_pivot P) w = P L_pivot; the held axes get a unit block
+    pivot_inertia = inertia + total_mass * (wp.diag(wp.vec3(wp.dot(s, s))) - wp.outer(s, s))
+    own = inertia * (omega - fitted) - total_mass * wp.cross(s, V - (pivot_velocity - wp.cross(fitted, s)))
+    held_axes = wp.identity(n=3, dtype=float) - free
+    w = wp.inverse(free * pivot_inertia * free + wp.trace(pivot_inertia) * held_axes) * (free * own)
+    spin = fitted + free * w
+    return pivot_velocity - wp.cross(spin, s), spin
+
+
 @wp.kernel
 def integrate_rigid_bodies(
     dt: float,
     ground_kind: int,
     friction: float,
     ground_y: float,
+    resting_speed: float,
     floor: wp.array(dtype=float),
+    restitution: wp.array(dtype=float),
     lowest: wp.array(dtype=float),
     support: wp.array2d(dtype=float),
     total_mass: wp.array(dtype=float),
     rest_inertia: wp.array(dtype=wp.mat33),
     linear: wp.array(dtype=wp.vec3),
     angular: wp.array(dtype=wp.vec3),
+    held_mass: wp.array(dtype=float),
+    held_first: wp.array(dtype=wp.vec3),
+    held_second: wp.array(dtype=wp.mat33),
+    held_linear: wp.array(dtype=wp.vec3),
+    held_angular: wp.array(dtype=wp.vec3),
     centre: wp.array(dtype=wp.vec3),
     orientation: wp.array(dtype=wp.quat),
     velocity: wp.array(dtype=wp.vec3),
     spin: wp.array(dtype=wp.vec3),
 ):
-    """Velocities from momenta, the ground's impulse, then advance centre and orientation; clears the sums.
+    """Velocities from momenta, the ground's impulse, the held particles (held_motion), then advance centre
+    and orientation; clears the sums.
 
-    A body whose lowest point would still reach below its floor (sim frame, m: the ground, or its
-    lowest rest point where the ground was laid above it, rest_state.support_height) is lifted
-    back onto it.
+    The ground acts when the body's lowest point would reach its floor (sim frame, m: the ground, or
+    its lowest rest point where the ground was laid above it, rest_state.support_height) within dt:
+    the approach (m/s) at the centre of pressure turns into restitution times it away from the
+    ground, unless it is below resting_speed (m/s, a body resting on the ground), and the centre
+    moves as if the body had turned at the floor. A body whose lowest point would still reach below
+    its floor is lifted back onto it.
     """
     b = wp.tid()
     R = wp.quat_to_matrix(orientation[b])
     inv_mass = 1.0 / total_mass[b]
-    inv_inertia = wp.inverse(R * rest_inertia[b] * wp.transpose(R))
+    inertia = R * rest_inertia[b] * wp.transpose(R)
+    inv_inertia = wp.inverse(inertia)
     V = linear[b] * inv_mass
     omega = inv_inertia * angular[b]
     c = centre[b]
@@ -114,10 +211,17 @@ def integrate_rigid_bodies(
                            wp.clamp(c[2], support[b, 1], -support[b, 3]))
         r = pressure - c
         up = wp.vec3(0.0, 1.0, 0.0)
-        approach = wp.dot(V + wp.cross(omega, r), up)
-        if approach < 0.0:
-            normal = -approach / impulse_response(r, up, inv_mass, inv_inertia)
+        approach = -wp.dot(V + wp.cross(omega, r), up)  # speed toward the ground, m/s
+        gap = wp.max(c[1] + lowest[b] - floor[b], 0.0)  # how far the lowest point is above its floor, m
+        if approach > 0.0 and approach * dt >= gap:  # it reaches the floor within this substep
+            rebound = float(0.0)
+            if approach > resting_speed:
+                rebound = restitution[b] * approach
+            normal = (approach + rebound) / impulse_response(r, up, inv_mass, inv_inertia)
             V, omega = push_at(r, normal * up, inv_mass, inv_inertia, V, omega)
+            # it reached the floor after gap / approach of dt and left it at the rebound speed since: the
+            # advance by dt V below puts it gap (1 + rebound / approach) too high
+            c = c - gap * (1.0 + rebound / approach) * up
             slide = V + wp.cross(omega, r)
             slide = wp.vec3(slide[0], 0.0, slide[2])
             speed = wp.length(slide)
@@ -127,6 +231,9 @@ def integrate_rigid_bodies(
                 if ground_kind == GROUND_FRICTION:
                     stop = wp.min(stop, friction * normal)
                 V, omega = push_at(r, -stop * along, inv_mass, inv_inertia, V, omega)
+    if held_mass[b] > 0.0:
+        V, omega = held_motion(total_mass[b], inertia, V, omega, held_mass[b], held_first[b], held_second[b],
+                               held_linear[b], held_angular[b])
     sink = floor[b] - (c[1] + lowest[b] + dt * V[1])
     if sink > 0.0:
         V = wp.vec3(V[0], wp.max(V[1], 0.0), V[2])
@@ -143,6 +250,11 @@ def integrate_rigid_bodies(
     spin[b] = omega
     linear[b] = wp.vec3(0.0)
     angular[b] = wp.vec3(0.0)
+    held_mass[b] = 0.0
+    held_first[b] = wp.vec3(0.0)
+    held_second[b] = wp.mat33(0.0)
+    held_linear[b] = wp.vec3(0.0)
+    held_angular[b] = wp.vec3(0.0)
 
 
 @wp.kernel
@@ -179,13 +291,13 @@ class RigidBodies:
         rest_positions: (P,3) all particles at rest, m.
         masses: (P,) kg.
         object_id: (P,) object of each particle.
-        rigid_objects: indices of the objects whose material is rigid.
+        rigid_objects: {object index: its material (schemas.materials.Rigid)} of the rigid objects.
         ground: the mpm.Ground (contact law, friction, and its height: None, no ground).
         contact_height: points this close above the ground (m) are in contact with it.
     """
 
     def __init__(self, rest_positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray,
-                 rigid_objects: list[int], ground, contact_height: float, device: str):
+                 rigid_objects: dict, ground, contact_height: float, device: str):
         self.ground, self.contact_height = ground, float(contact_height)
         ground_y = ground.height if ground.kind != GROUND_NONE and ground.height is not None else -1e30
         members, bodies, offsets, centres, inertias, totals, floors = [], [], [], [], [], [], []
@@ -217,6 +329,13 @@ class RigidBodies:
         self.angular = wp.zeros(n, dtype=wp.vec3, device=device)
         self.lowest = wp.array(np.full(n, 1e30, np.float32), dtype=float, device=device)
         self.floor = wp.array(np.array(floors, np.float32), dtype=float, device=device)
+        self.restitution = wp.array(np.array([m.restitution for m in rigid_objects.values()], np.float32),
+                                    dtype=float, device=device)
+        self.held_mass = wp.zeros(n, dtype=float, device=device)
+        self.held_first = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.held_second = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.held_linear = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.held_angular = wp.zeros(n, dtype=wp.vec3, device=device)
         self.support = wp.array(np.full((n, 4), 1e30, np.float32), dtype=float, device=device)
         self._ground_y = float(ground_y)
         self.device = device
@@ -224,13 +343,17 @@ class RigidBodies:
     def project(self, solver, dt: float) -> None:
         """Replace the rigid objects' particle motion after G2P by their rigid motion."""
         n, dev = self.n_members, self.device
+        held = [self.held_mass, self.held_first, self.held_second, self.held_linear, self.held_angular]
         wp.launch(gather_rigid_momentum, dim=n, device=dev, inputs=[
-            self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.x, solver.v,
-            self._ground_y, self.contact_height, self.linear, self.angular, self.lowest, self.support])
+            self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.x, solver.v, solver.C,
+            solver.free, self.spin, solver.grid.dx, solver.prescribed, self._ground_y, self.contact_height,
+            self.linear, self.angular, self.lowest, self.support, *held])
+        # a body resting on the ground approaches it at what one substep of gravity gives it
+        resting_speed = 2.0 * dt * float(np.linalg.norm(solver.gravity))
         wp.launch(integrate_rigid_bodies, dim=len(self.total_mass), device=dev, inputs=[
-            dt, self.ground.kind, self.ground.friction, self._ground_y, self.floor, self.lowest, self.support,
-            self.total_mass, self.rest_inertia, self.linear, self.angular, self.centre, self.orientation,
-            self.velocity, self.spin])
+            dt, self.ground.kind, self.ground.friction, self._ground_y, resting_speed, self.floor, self.restitution,
+            self.lowest, self.support, self.total_mass, self.rest_inertia, self.linear, self.angular, *held,
+            self.centre, self.orientation, self.velocity, self.spin])
         wp.launch(apply_rigid_motion, dim=n, device=dev, inputs=[
             self.members, self.body, self.rest_offset, self.centre, self.orientation, self.velocity, self.spin,
             solver.x, solver.v, solver.C, solver.F])

@@ -125,7 +125,7 @@ class Simulation:
         self._height_zero = self.ground_y if ground.enabled else self.grid.origin[1]
         self.solver = MPMSolver(self.grid, rest_sim, self.masses, self.volumes, self.object_id, self.materials,
                                 self.Q @ self.gravity_world, self.ground, walls=physics.walls, device=device)
-        rigid = [k for k, m in enumerate(self.materials) if m.preset == "rigid"]
+        rigid = {k: m for k, m in enumerate(self.materials) if m.preset == "rigid"}
         if rigid:  # points within half a lattice spacing of the ground touch it
             self.solver.attach_rigid(RigidBodies(rest_sim, self.masses, self.object_id, rigid, self.ground,
                                                  0.5 * spacing, device))
@@ -284,9 +284,10 @@ class Simulation:
 
     def _cfl_substep(self, max_speed: float) -> float:
         """The CFL substep in s for particles up to max_speed (m/s), what a condition may give, and a frame
-        of free fall."""
-        fall = float(np.linalg.norm(self.gravity_world)) / self.physics.fps
-        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall)
+        of free fall and of the conditions' forces; at most a frame."""
+        fall = (float(np.linalg.norm(self.gravity_world)) + self.conditions.acceleration) / self.physics.fps
+        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall,
+                                  1.0 / self.physics.fps)
 
     def settle(self) -> None:
         """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
@@ -454,8 +455,9 @@ class Simulation:
 
     def _follow_every(self, max_speed: float, h: float) -> int:
         """Substeps between grid moves: no particle (up to the last frame's speed, what a condition may
-        give, and a frame of free fall) travels a cell in between."""
-        speed = max(max_speed, self.speed_hint) + float(np.linalg.norm(self.gravity_world)) / self.physics.fps
+        give, and a frame of free fall and of the conditions' forces) travels a cell in between."""
+        speed = max(max_speed, self.speed_hint) + (float(np.linalg.norm(self.gravity_world))
+                                                   + self.conditions.acceleration) / self.physics.fps
         return max(1, int(self.grid.dx / (speed * h))) if speed > 0 else 1 << 30
 
     def _log_free(self, f: int) -> None:
@@ -473,7 +475,8 @@ class Simulation:
         v = self.solver.v.numpy()
         bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
         limit = BLOW_UP_FACTOR * (self.wave_speed + self.speed_hint
-                                  + np.linalg.norm(self.gravity_world) * self.physics.duration_s)
+                                  + (np.linalg.norm(self.gravity_world) + self.conditions.acceleration)
+                                  * self.physics.duration_s)
         if not bad.any() and max_speed <= limit:
             return
         p = int(np.argmax(bad)) if bad.any() else int(np.argmax(np.sum(v * v, axis=1)))
