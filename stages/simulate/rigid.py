@@ -91,12 +91,13 @@ def gather_rigid_momentum(
     b = body[i]
     momentum = mass[p] * v[p]
     offset = wp.quat_rotate(orientation[b], rest_offset[i])
-    wp.atomic_add(linear, b, momentum)
-    wp.atomic_add(angular, b, wp.cross(offset, momentum))
+    turning = wp.cross(offset, momentum)
     if free[p] == 0:
         c = C[p]
         affine = wp.vec3(c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1])
-        wp.atomic_add(angular, b, (0.25 * dx * dx * mass[p]) * (affine - 2.0 * spin[b]))
+        turning += (0.25 * dx * dx * mass[p]) * (affine - 2.0 * spin[b])
+    wp.atomic_add(linear, b, momentum)
+    wp.atomic_add(angular, b, turning)
     wp.atomic_min(lowest, b, offset[1])
     if prescribed[p] != 0:
         wp.atomic_add(held_mass, b, mass[p])
