@@ -23,9 +23,11 @@ points' extent on the ground) as near as it can to below the centre of mass.
 When the body's lowest point would reach its floor within the substep, the
 impulse there reverses the approach at that point to e times its speed (e the
 material's restitution; 0 stops it), and the body is moved as if it had met
-the floor at the moment it reached it and left it at the new speed; so a ball
-dropped from h rebounds to e^2 h, whatever the substep, a body at rest stays at
-rest, and one whose centre of mass is beyond its support tips over its edge.
+the floor at the moment it reached it and left it at the new speed, not from
+wherever in the contact layer it was found; so a ball dropped from h rebounds
+to e^2 h (to the accuracy of its flight's integration, tests/simulate), a body
+at rest stays at rest, and one whose centre of mass is beyond its support tips
+over its edge.
 An approach slower than two substeps of gravity is a body resting on the
 ground, which is pressed into it every substep and does not hop. Friction acts
 at the same point by Coulomb's law (sticky: no sliding; slip: none), so a ball
