@@ -34,7 +34,7 @@ from schemas import materials as M  # noqa: E402
 from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.reconstruct.cli import main as reconstruct  # noqa: E402
-from stages.reconstruct.depth import object_depths  # noqa: E402
+from stages.reconstruct.closure import object_depths  # noqa: E402
 from stages.reconstruct.geometry import intrinsics_from_fov  # noqa: E402
 from stages.reconstruct.synthetic import Box, Capsule, photograph, write_scene  # noqa: E402
 from stages.simulate.simulation import Simulation, mass_properties  # noqa: E402
@@ -120,7 +120,7 @@ def off_axis(count: int, band_deg: float = 8.0) -> tuple[list[str], list[list]]:
             mask = photograph(shape, K, np.eye(4), width, height).mask
             if not mask.any() or mask[[0, -1]].any() or mask[:, [0, -1]].any():
                 continue  # cut by the border
-            volume = object_depths(mask.astype(np.uint8), K, [shape.size_m])[0].volume(K)
+            volume = object_depths(mask.astype(np.uint8), K, [shape.size_m], 0.0)[0].volume(K)
             bands.setdefault((kind, int(math.degrees(off) // band_deg)), []).append(volume / shape.volume)
     columns = ["shape", "degrees off the axis", "shapes", "prior volume / shape: mean", "sd", "min", "max"]
     rows = [[kind, f"{band * band_deg:.0f}-{(band + 1) * band_deg:.0f}", len(v), f"{np.mean(v):.3f}",

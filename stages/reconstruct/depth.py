@@ -26,22 +26,23 @@ TIP_WINDOW_PX = 3.0
 for a round end of 10 px radius (about 30 edge points), little of a flat end's sides."""
 
 
-def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
-    """Half the object's thickness (H,W) in pixels, 0 off the mask, from round cross-sections.
+def medial_balls(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The round cross-sections a silhouette is inflated from: for each pixel (H,W), the radius R (px) of the
+    ball it lies on, the distance d (px) from the silhouette's edge, and the (row, col) (2,H,W) of the ball's
+    centre, the pixel's nearest point of the medial axis; R and d are 0 off the mask.
 
-    Each pixel at distance d from the silhouette, whose nearest medial-axis point
-    lies R from the silhouette, gets sqrt(R^2 - (R - d)^2): exact for a sphere
-    (R its radius) and for a cylinder seen side-on (R its radius).
+    A pixel d from the edge whose nearest medial-axis point lies R from the edge lies on a ball of radius
+    R about that point, at half thickness sqrt(R^2 - (R - d)^2): exact for a sphere (R its radius) and for
+    a cylinder seen side-on (R its radius).
     """
     padded = np.pad(mask.astype(bool), 2)  # objects cut by the image border close at the border
     # To the silhouette edge: it lies between the last inside and the first outside pixel centre, on
     # average 0.5 px before the latter on straight axis-aligned edges and 0.2-0.35 px on curved ones
     # (measured on ray-cast discs); 0.3 balances the two.
     dist = np.where(padded, ndimage.distance_transform_edt(padded) - EDGE_OFFSET_PX, 0.0)
-    # Away from the edge: up the signed distance's gradient. (The direction from the nearest outside
-    # pixel breaks its ties on a pixelated rim so that neighbours at a one-pixel nub face opposite
-    # ways: spurs of the axis, that gave the pixels near them a radius of about one pixel; 11 ray-cast
-    # discs in 300 lost most of their thickness on one side so.)
+    # Away from the edge: up the signed distance's gradient. The direction from the nearest outside pixel
+    # breaks its ties on a pixelated rim so that neighbours at a one-pixel nub face opposite ways, and
+    # spurs of the axis there give the pixels near them a radius of about one pixel.
     gradient = np.stack(np.gradient(dist - ndimage.distance_transform_edt(~padded)))
     slope = np.linalg.norm(gradient, axis=0)
     inward = gradient / np.maximum(slope, 1e-9)
@@ -66,10 +67,14 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
     # An axis pixel o < 1 px off the axis lies o nearer the edge than the axis, and its distance's slope
     # (central differences across the ridge) is o.
     at_axis = (axis_index[0], axis_index[1])
-    radius = dist[at_axis] + np.minimum(slope[at_axis], 1.0)
-    d = np.minimum(dist, radius)
-    half = np.sqrt(np.maximum(radius ** 2 - (radius - d) ** 2, 0.0))
-    return at(np.where(padded, half, 0.0), 0, 0)
+    radius = np.where(padded, dist[at_axis] + np.minimum(slope[at_axis], 1.0), 0.0)
+    return at(radius, 0, 0), at(np.minimum(dist, radius), 0, 0), at(axis_index, 0, 0) - 2
+
+
+def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
+    """Half the object's thickness (H,W) in pixels, 0 off the mask, from round cross-sections (medial_balls)."""
+    radius, d, _ = medial_balls(mask)
+    return np.sqrt(np.maximum(radius ** 2 - (radius - d) ** 2, 0.0))
 
 
 @dataclass
@@ -161,25 +166,16 @@ def largest_extent_px(mask: np.ndarray) -> float:
     return max(tip_px(edge[:, k], edge[:, 1 - k]) + tip_px(-edge[:, k], edge[:, 1 - k]) for k in range(2))
 
 
-def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float],
-                  inverse_depth: Optional[np.ndarray] = None) -> list[ObjectDepth]:
-    """Metric front/back depths of each object (labels k+1).
-
-    Its largest extent is sizes_m[k]: the larger of the silhouette's extent and
-    the inflation's thickness, both in pixels, equals size_m at the distance
-    Z = size_m * focal / extent_px of the silhouette's centre plane. (Measuring
-    the lifted 3D points instead over-sizes by a few percent: the back of the
-    rim spreads along the diverging rays.)
-    """
-    out = []
-    for k, size in enumerate(sizes_m):
-        mask = labels == k + 1
-        focal = K[1, 1]
-        shape = unit_distance_shape(mask, focal, inverse_depth)
-        extent_px = max(largest_extent_px(mask), 2 * inflation_half_thickness(mask).max())
-        distance = size * focal / extent_px
-        out.append(ObjectDepth(shape.front * distance, shape.back * distance))
-    return out
+def aligned_front(depth: ObjectDepth, inverse_depth: np.ndarray) -> ObjectDepth:
+    """``depth`` with its front replaced by a relative inverse depth (H,W) such as MiDaS gives (any scale and
+    shift), aligned to the front by least squares in inverse depth (as MiDaS is evaluated); the back keeps
+    its distance behind the front."""
+    mask = depth.pixels
+    design = np.stack([inverse_depth[mask], np.ones(mask.sum())], axis=1)
+    (scale, shift), *_ = np.linalg.lstsq(design, 1.0 / depth.front[mask], rcond=None)
+    floor = 1.0 / np.nanmax(depth.back)  # never behind the prior's back
+    front = np.where(mask, 1.0 / np.maximum(scale * inverse_depth + shift, floor), np.nan)
+    return ObjectDepth(front, front + (depth.back - depth.front))
 
 
 def depth_prior_image(depths: Sequence[ObjectDepth], K: np.ndarray) -> np.ndarray:

@@ -102,8 +102,10 @@ class _Parameters(torch.nn.Module):
 
 
 def optimize(initial: Gaussians, views: list[View], settings: Settings, device: str = "cpu",
-             seed: int = 0) -> tuple[Gaussians, np.ndarray]:
+             seed: int = 0, held: Optional[np.ndarray] = None) -> tuple[Gaussians, np.ndarray]:
     """Optimise ``initial`` against ``views`` (views[0] the input view, with colour).
+
+    ``held`` (G,) bool: Gaussians whose means stay where they are (their other parameters are optimised).
 
     Returns:
         The optimised Gaussians, transparent ones pruned, and the loss history
@@ -120,6 +122,7 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
     history = np.full((settings.iterations, len(LOSS_TERMS)), np.nan, np.float32)
     started = time.perf_counter()
     input_view = views[0]
+    free = None if held is None else torch.tensor(~held, device=device)[:, None].float()
     for it in range(settings.iterations):
         if it == settings.decay_at:
             for group in optimizer.param_groups:
@@ -136,6 +139,8 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
             total = total + settings.hard_depth_weight * hard
         optimizer.zero_grad(set_to_none=True)
         total.backward()
+        if free is not None:  # a zero gradient from the start leaves Adam's moments, and so the step, at zero
+            params.means.grad *= free
         optimizer.step()
         with torch.no_grad():
             params.colors.clamp_(0, 1)

@@ -14,7 +14,8 @@ from schemas import InputError, Scene
 from splat.project import NEAR_PLANE
 
 from .background import inpaint_background
-from .depth import DptDepth, ObjectDepth, depth_prior_image, object_depths
+from .closure import object_depths
+from .depth import DptDepth, ObjectDepth, depth_prior_image
 from .geometry import intrinsics_from_fov, working_size
 from .lift import Gaussians, lift_object
 from .optimize import Settings, optimize
@@ -45,6 +46,7 @@ class Prepared:
     depths: list[ObjectDepth]  # per object, camera-space z (H,W)
     depth_prior: np.ndarray    # f32 (H,W) metres along the ray, NaN off objects
     initial: Gaussians
+    seen: np.ndarray           # (G,) bool: the initial Gaussians on surfaces the photograph sees
     volumes: np.ndarray        # (objects,) m^3 the depth prior encloses; NaN for an init_ply's own shape
 
 
@@ -79,7 +81,7 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
              ", ".join(str(int((labels == k + 1).sum())) for k in range(len(specs))))
     background = inpaint_background(photo, labels)
     inverse_depth = DptDepth(depth_model, device).inverse_depth(photo) if depth_model is not None else None
-    depths = object_depths(labels, K, [o.size_m for o in scene.objects], inverse_depth)
+    depths = object_depths(labels, K, [o.size_m for o in scene.objects], scene.camera.pitch_deg, inverse_depth)
     for k, d in enumerate(depths):
         log.info("object %d: front depth %.3f-%.3f m, back up to %.3f m", k, np.nanmin(d.front),
                  np.nanmax(d.front), np.nanmax(d.back))
@@ -87,17 +89,21 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
             raise InputError(scene.file, f"objects[{k}].size_m", f"an object of {scene.objects[k].size_m:g} m "
                              f"covering its pixels stands {np.nanmin(d.front):.3g} m from the camera, nearer than the "
                              f"renderer sees ({NEAR_PLANE_M:g} m)", "give the object's real size in metres")
-    initial = initial_gaussians(scene, photo, labels, depths, K)
+    initial, seen = initial_gaussians(scene, photo, labels, depths, K)
     volumes = np.array([np.nan if scene.reconstruct.init_ply is not None else d.volume(K) for d in depths])
     for k, volume in enumerate(volumes):
         if np.isfinite(volume):
             log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
-    return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, volumes)
+    return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, seen,
+                    volumes)
 
 
 def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depths: list[ObjectDepth],
-                      K: np.ndarray) -> Gaussians:
-    """Lift every object at the working resolution (reconstruct.resolution), or place reconstruct.init_ply."""
+                      K: np.ndarray) -> tuple[Gaussians, np.ndarray]:
+    """Lift every object at the working resolution (reconstruct.resolution), or place reconstruct.init_ply.
+
+    Returns the Gaussians and which of them lie on surfaces the photograph sees, (G,) bool (all of a PLY's:
+    its shape is the user's, and the optimisation may move any of it)."""
     height, width = labels.shape
     size = working_size(width, height, scene.reconstruct.resolution)
     K_work = K.copy()
@@ -107,17 +113,18 @@ def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depth
         if len(scene.objects) != 1:
             raise InputError(scene.file, "reconstruct.init_ply", "an initial PLY describes one object but the "
                              f"scene has {len(scene.objects)}", "use init_ply with a single object, or remove it")
-        return place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
+        placed = place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
+        return placed, np.ones(len(placed), bool)
     small = [ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True))
              for d in depths]
     for stride in range(1, 9):  # the finest sampling within the budget
-        parts = [lift_object(d, K_work, photo_work, k, front_stride=stride, back_stride=2 * stride)
-                 for k, d in enumerate(small)]
-        if sum(map(len, parts)) <= MAX_GAUSSIANS:
+        lifted = [lift_object(d, K_work, photo_work, k, front_stride=stride, back_stride=2 * stride)
+                  for k, d in enumerate(small)]
+        if sum(len(part) for part, _ in lifted) <= MAX_GAUSSIANS:
             break
-    for k, part in enumerate(parts):
+    for k, (part, _) in enumerate(lifted):
         log.info("object %d: %d initial Gaussians (front sampled every %d pixel(s))", k, len(part), stride)
-    return Gaussians.concatenate(parts)
+    return Gaussians.concatenate([part for part, _ in lifted]), np.concatenate([seen for _, seen in lifted])
 
 
 def optimize_scene(scene: Scene, prepared: Prepared, device: str = "cpu",
@@ -131,4 +138,7 @@ def optimize_scene(scene: Scene, prepared: Prepared, device: str = "cpu",
               for i, v in enumerate(scene.reconstruct.extra_views)]
     log.info("optimising %d Gaussians for %d iterations at %dx%d on %d view(s)", len(prepared.initial),
              settings.iterations, views[0].camera.width, views[0].camera.height, len(views))
-    return optimize(prepared.initial, views, settings, device)
+    # Only the input view supervises the prior's unseen back and rim wall; where no extra view sees them,
+    # they stay where the prior put them (the optimisation would drift them by its learning rate a step).
+    held = None if views[1:] else ~prepared.seen
+    return optimize(prepared.initial, views, settings, device, held=held)

@@ -103,6 +103,79 @@ class Box:
         return np.where(cells[..., None] == 0, [0.85, 0.45, 0.2], [0.3, 0.55, 0.8])
 
 
+def standing_axes(pitch_deg: float, yaw_deg: float = 0.0) -> np.ndarray:
+    """(3,3) rows: an upright body's own x, up and z axes in the frame of a camera pitched down by pitch_deg,
+    the body turned by yaw_deg about the vertical."""
+    p, y = math.radians(pitch_deg), math.radians(yaw_deg)
+    right, up, away = np.array([1.0, 0, 0]), np.array([0.0, -math.cos(p), -math.sin(p)]), np.array([0.0, -math.sin(p), math.cos(p)])
+    return np.stack([math.cos(y) * right + math.sin(y) * away, up, -math.sin(y) * right + math.cos(y) * away])
+
+
+@dataclass(frozen=True)
+class UprightCylinder:
+    """A cylinder standing on the ground: ``centre`` (3,) m its middle, ``axes`` (3,3) rows its own x, up, z
+    (standing_axes), ``radius`` and ``height`` m."""
+
+    centre: np.ndarray
+    axes: np.ndarray
+    radius: float
+    height: float
+
+    @property
+    def size_m(self) -> float:
+        """Largest extent: the longer of its diameter and its height."""
+        return max(2 * self.radius, self.height)
+
+    @property
+    def volume(self) -> float:
+        return math.pi * self.radius ** 2 * self.height
+
+    def principal_moments(self, density: float) -> np.ndarray:
+        m = density * self.volume
+        across = m * (3 * self.radius ** 2 + self.height ** 2) / 12
+        return np.sort([m * self.radius ** 2 / 2, across, across])
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        local = (points - self.centre) @ self.axes.T
+        d = np.stack([np.hypot(local[..., 0], local[..., 2]) - self.radius, np.abs(local[..., 1]) - self.height / 2], -1)
+        return np.linalg.norm(np.maximum(d, 0.0), axis=-1) + np.minimum(np.max(d, axis=-1), 0.0)
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        """Bands up its side and a tint around it."""
+        local = (points - self.centre) @ self.axes.T
+        bands = 0.5 + 0.5 * np.sin(local[..., 1] / self.height * 4 * math.pi)
+        around = 0.5 + 0.5 * np.sin(np.arctan2(local[..., 2], local[..., 0]) * 3)
+        return np.stack([0.2 + 0.7 * bands, 0.3 + 0.5 * around, 0.8 - 0.6 * bands], axis=-1)
+
+
+@dataclass(frozen=True)
+class TurnedBox:
+    """A box standing on the ground, turned about the vertical: ``centre`` (3,) m, ``axes`` (3,3) rows its own
+    x, up, z (standing_axes), ``half`` (3,) m its half sides along them."""
+
+    centre: np.ndarray
+    axes: np.ndarray
+    half: np.ndarray
+
+    @property
+    def size_m(self) -> float:
+        """Largest extent: the longest side."""
+        return 2 * float(np.max(self.half))
+
+    @property
+    def volume(self) -> float:
+        return 8 * float(np.prod(self.half))
+
+    def principal_moments(self, density: float) -> np.ndarray:
+        return Box(self.centre, self.half).principal_moments(density)
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        return Box(np.zeros(3), self.half).signed_distance((points - self.centre) @ self.axes.T)
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        return Box(np.zeros(3), self.half).color((points - self.centre) @ self.axes.T)
+
+
 @dataclass
 class Photograph:
     """What a camera sees of the capsule: RGB u8 (H,W,3) over a grey backdrop, mask (H,W) bool, and the
@@ -113,7 +186,10 @@ class Photograph:
     distance: np.ndarray
 
 
-def photograph(shape: Capsule | Box, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,
+Shape = Capsule | Box | UprightCylinder | TurnedBox
+
+
+def photograph(shape: Shape, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,
                steps: int = 96) -> Photograph:
     """Ray-cast ``shape`` from the camera (pinhole, DESIGN.md conventions)."""
     rotation, translation = world_to_camera[:3, :3], world_to_camera[:3, 3]
@@ -128,15 +204,16 @@ def photograph(shape: Capsule | Box, K: np.ndarray, world_to_camera: np.ndarray,
     return Photograph((rgb * 255).round().astype(np.uint8), hit, np.where(hit, t, np.nan))
 
 
-def write_scene(folder: Path, shape: Capsule | Box, fov_deg: float = 40.0, width: int = 256, height: int = 192,
-                iterations: int = 600) -> Path:
-    """A scene folder (scene.yaml, photo.png, mask.png) of ``shape`` seen by the input camera; returns scene.yaml."""
+def write_scene(folder: Path, shape: Shape, fov_deg: float = 40.0, width: int = 256, height: int = 192,
+                iterations: int = 600, pitch_deg: float = 0.0) -> Path:
+    """A scene folder (scene.yaml, photo.png, mask.png) of ``shape`` seen by the input camera (the world frame,
+    pitched down by pitch_deg); returns scene.yaml."""
     folder.mkdir(parents=True, exist_ok=True)
     photo = photograph(shape, intrinsics_from_fov(fov_deg, width, height), np.eye(4), width, height)
     write_image(folder / "photo.png", cv2.cvtColor(photo.rgb, cv2.COLOR_RGB2BGR))
     write_image(folder / "mask.png", photo.mask.astype(np.uint8) * 255)
     (folder / "scene.yaml").write_text(
-        f"image: photo.png\ncamera: {{fov_deg: {fov_deg}}}\n"
+        f"image: photo.png\ncamera: {{fov_deg: {fov_deg}, pitch_deg: {pitch_deg}}}\n"
         f"objects:\n  - mask: mask.png\n    size_m: {shape.size_m}\n"
         f"reconstruct: {{resolution: {max(width, height)}, iterations: {iterations}}}\n")
     return folder / "scene.yaml"

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from stages.reconstruct.depth import (ObjectDepth, depth_prior_image, inflation_half_thickness, largest_extent_px,
-                                     object_depths)
+from stages.reconstruct.closure import object_depths
+from stages.reconstruct.depth import ObjectDepth, depth_prior_image, inflation_half_thickness, largest_extent_px
 from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
 
 
@@ -84,7 +84,7 @@ def test_sphere_prior_is_close_to_a_ray_cast_sphere_and_has_size_m():
     disc_term = b ** 2 - (centre @ centre - radius_m ** 2)
     mask = disc_term > 0
     truth = b - np.sqrt(np.where(mask, disc_term, 0))
-    depths = object_depths(mask.astype(np.uint8), K, [2 * radius_m])
+    depths = object_depths(mask.astype(np.uint8), K, [2 * radius_m], 0.0)
     thickness = np.nanmax(depths[0].back) - np.nanmin(depths[0].front)
     assert thickness == pytest.approx(2 * radius_m, rel=0.07)  # the silhouette is 40 px: +-1 px each side
     prior = depth_prior_image(depths, K)
@@ -97,8 +97,8 @@ def test_sphere_prior_is_close_to_a_ray_cast_sphere_and_has_size_m():
 @pytest.mark.parametrize("height, width", [(48, 64), (96, 128), (192, 256)])
 def test_the_volume_between_front_and_back_is_the_balls(height, width):
     """ObjectDepth.volume of a ball's ray-cast front and back depths (pixel centres' rays) is 4/3 pi r^3 to
-    0.3 % at a silhouette 20-80 px across; that of the inflation prior of its silhouette, placed at size_m,
-    to 5 % (the pixelated rim and the extent's fraction of a pixel)."""
+    0.3 % at a silhouette 20-80 px across; that of the medial-ball prior of its silhouette, placed at size_m,
+    to 5 % at 40-80 px and 15 % at 20 px."""
     K = intrinsics_from_fov(40, width, height)
     rays = pixel_rays(K, height, width)
     radius_m, centre = 0.15, np.array([0.05, -0.02, 1.0])
@@ -109,4 +109,6 @@ def test_the_volume_between_front_and_back_is_the_balls(height, width):
     z = lambda t: np.where(mask, t * rays[..., 2], np.nan)  # noqa: E731 (unit rays: z = t * ray_z)
     ball = 4 / 3 * np.pi * radius_m ** 3
     assert ObjectDepth(z(b - root), z(b + root)).volume(K) == pytest.approx(ball, rel=0.003)
-    assert object_depths(mask.astype(np.uint8), K, [2 * radius_m])[0].volume(K) == pytest.approx(ball, rel=0.05)
+    # a 20 px silhouette's medial axis is a cluster of points, whose discs cover it at radii 5 % short
+    tolerance = 0.15 if width < 100 else 0.05
+    assert object_depths(mask.astype(np.uint8), K, [2 * radius_m], 0.0)[0].volume(K) == pytest.approx(ball, rel=tolerance)

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 import splat
-from stages.reconstruct.depth import object_depths
+from stages.reconstruct.closure import object_depths
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lift import lift_object
 from stages.reconstruct.metrics import iou
@@ -16,8 +16,8 @@ def lifted():
     capsule = Capsule.tilted()
     K = intrinsics_from_fov(40, 128, 96)
     photo = photograph(capsule, K, np.eye(4), 128, 96)
-    depth = object_depths(photo.mask.astype(np.uint8), K, [capsule.size_m])[0]
-    return capsule, K, lift_object(depth, K, photo.rgb, 0)
+    depth = object_depths(photo.mask.astype(np.uint8), K, [capsule.size_m], 0.0)[0]
+    return capsule, K, lift_object(depth, K, photo.rgb, 0)[0]
 
 
 def test_gaussians_are_valid_and_near_the_true_surface(lifted):
