@@ -78,8 +78,8 @@ def fit_grid(rest_sim: np.ndarray, cells: int, *, ground_y: float | None, walls:
     Args:
         rest_sim: (P,3) rest positions in the simulation frame, m.
         cells: grid cells along the longest side of the domain (physics.grid).
-        ground_y: height of the ground plane (simulation frame, m; at or above the lowest rest
-            point, rest_state.support_height), or None without a ground.
+        ground_y: height of the ground plane (simulation frame, m; the lowest rest point), or None
+            without a ground.
         walls: close the domain tightly around the objects.
 
     Travel needs no room: without walls the grid follows the particles by whole cells

@@ -194,7 +194,7 @@ def integrate_rigid_bodies(
     and orientation; clears the sums.
 
     The ground acts when the body's lowest point would reach its floor (sim frame, m: the ground, or
-    its lowest rest point where the ground was laid above it, rest_state.support_height) within dt:
+    its lowest rest point where that lies below the ground) within dt:
     the approach (m/s) at the centre of pressure turns into restitution times it away from the
     ground, unless it is below resting_speed (m/s, a body resting on the ground), and the centre
     moves as if the body had turned at the floor. A body whose lowest point would still reach below

@@ -88,7 +88,6 @@ class Simulation:
         self.gravity_world = domain.world_gravity(physics.gravity, pitch_deg)
         self.Q = domain.simulation_rotation(domain.down_direction(self.gravity_world, pitch_deg))
         self.gravity_frame = domain.gravity_frame(self.Q)
-        g = float(np.linalg.norm(self.gravity_world))
         velocities = np.array([domain.condition_frame(c, self.gravity_frame).T @ np.asarray(c.velocity)
                                for c in physics.conditions if c.type in ("impulse", "velocity")],
                               dtype=np.float64).reshape(-1, 3)  # world frame
@@ -112,12 +111,8 @@ class Simulation:
 
         rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
-        # the ground: the plane, normal to gravity, on which the objects stand as photographed
-        # a deformable body stands on a foot wide enough to carry its weight (rest_state.bearing_stress)
-        bearing = {k: g * float(self.masses[self.object_id == k].sum()) / rest_state.bearing_stress(m)
-                   for k, m in enumerate(self.materials) if m.preset != "rigid"}
-        self.ground_y = (rest_state.support_height(rest_sim, self.masses, self.object_id, spacing, bearing)
-                         if ground.enabled else None)
+        # the ground: the plane, normal to gravity, through the objects' lowest point; they stand on their base
+        self.ground_y = float(rest_sim[:, 1].min()) if ground.enabled else None
         self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, walls=physics.walls)
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
                        if ground.enabled else Ground(GROUND_NONE))
@@ -233,9 +228,7 @@ class Simulation:
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
         """Each object's mass, volume and principal moments of inertia about its centre of mass."""
         if self.ground_y is not None:
-            sunk = float(self.ground_y - rest_sim[:, 1].min())
-            log.info("ground %.2f mm above the lowest point, so that the objects stand on their centres of mass",
-                     1e3 * sunk)
+            log.info("the ground lies through the objects' lowest point")
         for k, material in enumerate(self.materials):
             sel = self.object_id == k
             m, x = self.masses[sel], rest_sim[sel]
@@ -248,10 +241,10 @@ class Simulation:
 
     def _warn_unsupported(self, k: int, x: np.ndarray, centre: np.ndarray) -> None:
         """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame)
-        up: its centre of mass lies outside the hull of its points at or below the ground plane (within
-        rest_state.MAX_SINK), so it tips over at t = 0."""
-        foot = x[:, 1] <= self.ground_y
-        if not foot.any():
+        up: its centre of mass lies outside the hull of its points within a lattice spacing of the ground
+        (its contact patch, as the ground's nodes meet it), so it tips over at t = 0."""
+        foot = x[:, 1] <= self.ground_y + self.spacing
+        if not np.any(x[:, 1] <= self.ground_y + 0.5 * self.spacing):
             return  # in flight
         margin = rest_state.support_margin(x[foot][:, [0, 2]], centre[[0, 2]])
         if margin >= self.spacing:
@@ -259,11 +252,11 @@ class Simulation:
         where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge"
                  % (1e3 * margin)) if math.isfinite(margin) else "over a line of contact, not an area"
         log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its "
-                    "points at the ground, which may rise %.0f %% of its height into it) holds its centre of mass "
-                    "%s, so it tips over from t = 0 as that shape would, rigid too. If the photographed object "
-                    "stands, its reconstruction is too thin or leans where the photograph does not show it (a "
-                    "bike seen from the side): hold its foot with a `fixed` condition (physics.conditions) or "
-                    "add reconstruct.extra_views", k, 100 * rest_state.MAX_SINK, where)
+                    "points within %.1f mm of the ground) holds its centre of mass %s, so it tips over from t = 0 "
+                    "as that shape would, rigid too. If the photographed object stands, its reconstruction is too "
+                    "thin or leans where the photograph does not show it (a bike seen from the side): hold its "
+                    "foot with a `fixed` condition (physics.conditions) or add reconstruct.extra_views", k,
+                    1e3 * self.spacing, where)
 
     def _warn_crushed_by_weight(self, k: int, height: float) -> None:
         """Say so when object k's own weight presses its base beyond its yield stress (rho g H, a column's)."""
@@ -317,7 +310,8 @@ class Simulation:
         dt = self._cfl_substep(0.0)  # even under a physics.dt: a dt that blows up is the run's to report
         s.hold_yield(True)  # the photographed solid stands on its elastic stress; where that is past yield, the run yields
         s.pin(True)
-        relaxation = rest_state.Relaxation(self.masses)
+        bodies = [np.flatnonzero(self.object_id == k) for k in deformable]
+        relaxation = rest_state.Relaxation(self.masses, rest_sim, bodies)
         started, steps = time.perf_counter(), 0
         while steps * dt < rest_state.SETTLE_PERIODS * period:
             s.substep(dt)
