@@ -123,6 +123,10 @@ def lift_object(depth: ObjectDepth, K: np.ndarray, photo: np.ndarray, object_id:
         parts.append(_surfels(points, pixels & grid, stride, colors, object_id))
     wall_spacing = back_stride * depth.front / K[0, 0]  # metres per pixel at the front surface, times the stride
     parts.append(_rim_wall(front, back, pixels, wall_spacing, colors, object_id))
+    # The photograph sees the front, but not where it was cut onto the base the body stands on.
+    front_grid = np.zeros_like(pixels)
+    front_grid[front_stride // 2::front_stride, front_stride // 2::front_stride] = True
+    on_base = depth.base if depth.base is not None else np.zeros_like(pixels)
     seen = np.zeros(sum(map(len, parts)), bool)
-    seen[:len(parts[0])] = True
+    seen[:len(parts[0])] = ~on_base[pixels & front_grid]
     return Gaussians.concatenate(parts), seen
