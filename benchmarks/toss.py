@@ -1,6 +1,6 @@
 """Toss: a body tossed straight up must come down where it went up.
 
-    PYTHONPATH=. python benchmarks/toss.py results/ball ... [--presets jelly rigid ...] [--speed 1.2]
+    python -m benchmarks.toss results/ball ... [--presets scene jelly rigid ...] [--speed 1.2] [--no-figures]
 
 Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
 scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
@@ -11,7 +11,8 @@ horizontal travel of the centre of mass from where it went up (mm, % of
 size_m), the largest turn of the body (degrees, best rigid fit of all
 particles), the largest rise of the total energy (kinetic + potential, the
 trajectories' diagnostics) above its value at the first frame after the toss,
-as a share of the toss's kinetic energy, substeps and seconds.
+as a share of the toss's kinetic energy, substeps and seconds. The table goes to
+benchmarks/results/toss.json (rows merged by scene, preset and ground), and RESULTS.md is regenerated.
 """
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.scene import GroundConfig, Impulse
 from stages.simulate.simulation import Simulation
 
+from benchmarks.figures import add_arguments, invocation, write_figures
 from benchmarks.rest import PRESET_MODELS, drift
 
 
@@ -60,10 +62,14 @@ def main() -> None:
     parser.add_argument("--grounds", nargs="+", default=["friction", "slip"], choices=["friction", "slip", "sticky"])
     parser.add_argument("--speed", type=float, default=1.2, help="m/s straight up")
     parser.add_argument("--duration", type=float, default=None, help="seconds (default: the scene's)")
+    add_arguments(parser)
     args = parser.parse_args()
     logging.basicConfig(level=logging.WARNING)
-    print("| scene | preset | ground | travel (mm) | travel (% size) | turn (deg) | energy gain (% toss) | substeps | s |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    columns = ["scene", "preset", "ground", "travel (mm)", "travel (% size)", "turn (deg)", "energy gain (% toss)",
+               "substeps", "s"]
+    print("| " + " | ".join(columns) + " |")
+    print("|" + " --- |" * len(columns))
+    rows = []
     for folder in args.results:
         scene = load_scene(args.scenes_dir / folder.name / "scene.yaml")
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
@@ -71,14 +77,31 @@ def main() -> None:
         for preset in args.presets:
             materials = ([o.material for o in scene.objects] if preset == "scene"
                          else [PRESET_MODELS[preset]() for _ in scene.objects])
-            label = preset if preset != "scene" else "scene's " + ", ".join(m.preset for m in materials)
+            label = preset if preset != "scene" else "scene's " + ", ".join(
+                f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
             for ground in args.grounds:
                 start = time.perf_counter()
                 sim, tr = toss(scene, gaussians, materials, ground, args.speed, args.duration)
                 r = drift(sim, tr)
-                print(f"| {folder.name} | {label} | {ground} | {1e3 * r['travel']:.1f} | "
-                      f"{100 * r['travel'] / size:.2f} | {r['turn']:.2f} | {100 * energy_gain(tr):.2f} | "
-                      f"{r['substeps']} | {time.perf_counter() - start:.0f} |", flush=True)
+                rows.append([folder.name, label, ground, f"{1e3 * r['travel']:.1f}", f"{100 * r['travel'] / size:.2f}",
+                             f"{r['turn']:.2f}", f"{100 * energy_gain(tr):.2f}", r["substeps"],
+                             f"{time.perf_counter() - start:.0f}"])
+                print("| " + " | ".join(str(c) for c in rows[-1]) + " |", flush=True)
+    if not args.no_figures:
+        write_figures(
+            "toss", "Toss",
+            f"""A body tossed straight up must come down where it went up. Each reconstruction's conditions are
+            replaced by one impulse of {args.speed:g} m/s against gravity at t = 0, and it is simulated for its
+            scene's duration under its scene's camera, as each preset with the preset's defaults (`scene's`: the
+            scene's own material), on friction ground (the scene's coefficient) and on slip ground: the largest
+            travel of its centre of mass along the ground from where it went up (mm and % of size_m), the
+            largest turn of the body (best rigid fit of all particles), the largest rise of its total energy
+            (kinetic + potential, the trajectories' diagnostics) above its value at the first frame after the
+            toss, as a share of the toss's kinetic energy, substeps and seconds. Targets: 2 % of size_m, 3
+            degrees, 2 %. ball is the example scene; cat and coin are scikit-image's chelsea (the head, jelly)
+            and coins (the large coin at the right, metal, seen from 80 degrees above) as a new user writes
+            them (scene files in the stop's notes).""",
+            invocation(__file__), columns, rows, merge_on=3)
 
 
 if __name__ == "__main__":

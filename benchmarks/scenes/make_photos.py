@@ -4,6 +4,8 @@
 - motorcycle/: the left view of `stereo_motorcycle`, taken as a 30 cm toy.
 - loaf/:       a loaf made of scikit-image's textures (`gravel` as its crust, `brick` as the table), for
                tearing (benchmarks/tearing.py).
+- cat/:        `chelsea`, the cat's head as a 15 cm jelly, tossed up (benchmarks/toss.py).
+- coin/:       `coins`, the large coin at the right as a 3 cm metal disc seen from 80 degrees above.
 
 Usage: python benchmarks/scenes/make_photos.py
 """
@@ -35,6 +37,7 @@ def loaf(height: int = 300, width: int = 420) -> np.ndarray:
     return np.clip(image, 0, 255).astype(np.uint8)
 
 if __name__ == "__main__":
-    for name, rgb in (("rocket", skimage.data.rocket()), ("motorcycle", skimage.data.stereo_motorcycle()[0])):
+    for name, rgb in (("rocket", skimage.data.rocket()), ("motorcycle", skimage.data.stereo_motorcycle()[0]),
+                      ("cat", skimage.data.chelsea()), ("coin", cv2.cvtColor(skimage.data.coins(), cv2.COLOR_GRAY2RGB))):
         write_image(HERE / name / "photo.png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     write_image(HERE / "loaf" / "photo.png", loaf())
