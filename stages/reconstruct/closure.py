@@ -10,8 +10,9 @@ centres lie on the vertical plane across that view: the body is
 mirror-symmetric about that plane, so its back continues its front, a ball
 becomes a ball and a capsule a capsule, and the lowest point of a round body
 lies under its centre of mass whatever the camera's pitch. Each pixel's ray
-enters and leaves its ball: there lie the body's front, which keeps the
-photograph's pixels, and its back.
+enters and leaves the union of the balls: there lie the body's front, which
+keeps the photograph's pixels, and its back. A body that would rest off its
+centre of mass is cut flat where its base holds it (standing_cut).
 """
 from __future__ import annotations
 
@@ -30,16 +31,19 @@ from .depth import ObjectDepth, aligned_front, medial_balls
 log = logging.getLogger("physmotion.reconstruct")
 
 AXIS_SPACING_PX = 2.5
-"""Medial axis points nearer than this to one with a larger ball are dropped (sparse_axis)."""
+AXIS_SPACING_SHARE = 0.2
+"""Medial axis points nearer than AXIS_SPACING_PX, or this share of its radius, to one with a larger ball
+are dropped (sparse_axis): balls 0.2 r apart leave a surface 0.005 r from their envelope."""
 MAX_CUT = 0.15
 """A body is cut flat by at most this share of its height to stand on its base (the coffee cup, on the
-tip of its handle as photographed, needs 13 %)."""
+tip of its handle as photographed, needs 13 %)..."""
+MAX_CUT_VOLUME = 0.03
+"""... and at most this share of its volume (the cup loses 1.2 %; a capsule leaning 20 degrees would
+lose 7 %, and is left to fall)."""
 STAND_MARGIN = 0.02
 """A base holds the centre of mass at least this share of size_m inside its edge."""
 BASE_LAYER = 0.005
 """The base: the body within this share of size_m of the cut, or a pixel's footprint and a half."""
-MAX_CUT_VOLUME = 0.03
-"""... and at most this share of its volume (the cup loses 1.2 %)."""
 SAMPLES_PER_RAY = 8
 """Points along each pixel's ray through the body, for its centre of mass."""
 STEEPEST_VERTICAL_PLANE = math.cos(math.radians(75.0))
@@ -123,19 +127,20 @@ def ray_ball(rays: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> tuple[
     return (b - root) / a, (b + root) / a
 
 
-def sparse_axis(mask: np.ndarray, radius: np.ndarray, _distance: np.ndarray,
-                axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def sparse_axis(mask: np.ndarray, radius: np.ndarray, axis: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The medial balls (depth.medial_balls: radius (H,W) px, axis (2,H,W)) with each axis point kept only
-    where no other within AXIS_SPACING_PX has a larger radius, and each pixel of `mask` (H,W) bool on the
-    ball of its nearest kept point: (radius, axis rows, axis cols) (H,W). A digitised disc's axis is a
-    cluster of a few pixels about its centre, whose discs, scaled to cover it, are each a pixel short:
-    a ball 9.5 degrees off the optical axis lost 5 % of its volume so."""
+    where no kept point with a larger ball lies within AXIS_SPACING_PX or AXIS_SPACING_SHARE of that
+    ball's radius, and each pixel of `mask` (H,W) bool on the ball of its nearest kept point: (radius,
+    axis rows, axis cols) (H,W). A digitised disc's axis is a cluster of a few pixels about its centre,
+    whose discs, scaled to cover it, are each a pixel short (a ball 9.5 degrees off the optical axis lost
+    5 % of its volume so); and every ray meets every ball (ray_union), so their number sets the time."""
     points, first = np.unique(axis[:, mask].T, axis=0, return_index=True)
     radii = radius[mask][first]
     order = np.argsort(-radii, kind="stable")
     kept = np.zeros(len(points), bool)
+    reach = np.maximum(AXIS_SPACING_PX, AXIS_SPACING_SHARE * radii)
     for i in order:  # largest first: a point is kept unless a kept larger one lies near it
-        near = kept & (np.hypot(*(points - points[i]).T) <= AXIS_SPACING_PX)
+        near = kept & (np.hypot(*(points - points[i]).T) <= reach)
         kept[i] = not near.any()
     centres = np.zeros(mask.shape, bool)
     centres[points[kept, 0], points[kept, 1]] = True
@@ -216,7 +221,8 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
     (off the optical axis the picture stretches it into an ellipse, whose medial axis is a segment). Each
     ray's front and back are where it enters and leaves the union of the balls."""
     view = FacingView.of(mask, K, down)
-    radius, axis_r, axis_c = sparse_axis(view.mask, *medial_balls(view.mask))
+    radius, _, axis = medial_balls(view.mask)
+    radius, axis_r, axis_c = sparse_axis(view.mask, radius, axis)
     radius = radius * disc_cover_scale(view.mask, axis_r, axis_c, radius)
     focal = view.K[1, 1]
     unit_extent = union_extent(np.stack([axis_r, axis_c], axis=-1)[view.mask], radius[view.mask], focal)
