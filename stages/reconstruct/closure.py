@@ -34,14 +34,17 @@ AXIS_SPACING_PX = 2.5
 AXIS_SPACING_SHARE = 0.2
 """Medial axis points nearer than AXIS_SPACING_PX, or this share of its radius, to one with a larger ball
 are dropped (sparse_axis): balls 0.2 r apart leave a surface 0.005 r from their envelope."""
-MAX_CUT = 0.15
+MAX_CUT = 0.2
 """A body is cut flat by at most this share of its height to stand on its base (the coffee cup, on the
-tip of its handle as photographed, needs 13 %)..."""
+tip of its handle as photographed, needs 18 %)..."""
 MAX_CUT_VOLUME = 0.03
-"""... and at most this share of its volume (the cup loses 1.2 %; a capsule leaning 20 degrees would
+"""... and at most this share of its volume (the cup loses 2.6 %; a capsule leaning 20 degrees would
 lose 7 %, and is left to fall)."""
 STAND_MARGIN = 0.02
 """A base holds the centre of mass at least this share of size_m inside its edge."""
+STAND_TILT_DEG = 10.0
+"""A body cut to stand gets a base that holds it tilted this far, where the caps allow: on the narrowest
+base that held it at all the coffee cup, pushed at its rim by 0.15 N for 0.25 s, fell over."""
 BASE_LAYER = 0.005
 """The base: the body within this share of size_m of the cut, or a pixel's footprint and a half."""
 SAMPLES_PER_RAY = 8
@@ -247,21 +250,23 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
 
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
                  layer: float) -> tuple[np.ndarray, np.ndarray, float]:
-    """The body between t_in and t_out (N,) along rays (N,3) (camera frame, z = 1), cut flat by the lowest
-    plane normal to gravity (`down` (3,)) above which it stands: the part of it within `layer` m of the
-    plane, its base seen from above, holds its centre of mass at least `margin` m inside. Where the outline meets
-    the ground the contact is a cut, not a point: a body whose lowest point lies off its centre of mass (a
-    cup on its handle's tip) stands on its base. At most MAX_CUT of its height and MAX_CUT_VOLUME of its
-    volume are cut; a body that needs more does not stand as photographed, and is left whole. Returns the clipped (t_in, t_out) and the cut
-    (m above the lowest point)."""
+    """The body between t_in and t_out (N,) along rays (N,3) (camera frame, z = 1), cut flat where it
+    stands on the ground (gravity along `down` (3,)). Its base is its part within `layer` m of its lowest
+    plane normal to gravity. A body whose base holds its centre of mass at least `margin` m inside (a
+    ball) is left whole. Otherwise (a cup on its handle's tip) the contact is a cut, not a point: the
+    body is cut by the lowest plane above which its base holds its centre of mass against a tilt of
+    STAND_TILT_DEG (inside by tan of it times the centre's height), as a thing made to stand does, else by
+    the lowest on which it stands at all; at most MAX_CUT of its height and MAX_CUT_VOLUME of its volume.
+    A body that needs more does not stand as photographed, and is left whole to fall. Returns the clipped
+    (t_in, t_out) and the cut (m above the lowest point)."""
     across = np.cross(down, [0.0, 0.0, 1.0]) if abs(down[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
     across /= np.linalg.norm(across)
     along = np.cross(down, across)
     steep = rays @ down  # height above the camera falls by t * steep
-    height_of = lambda t: -t * steep  # noqa: E731
-    lowest = float(np.minimum(height_of(t_in), height_of(t_out)).min())
-    tall = float(np.maximum(height_of(t_in), height_of(t_out)).max()) - lowest
+    lowest = float(np.minimum(-t_in * steep, -t_out * steep).min())
+    tall = float(np.maximum(-t_in * steep, -t_out * steep).max()) - lowest
     fractions = (np.arange(SAMPLES_PER_RAY) + 0.5) / SAMPLES_PER_RAY
+    whole = float(np.sum(t_out ** 3 - t_in ** 3))  # each ray's pyramid holds (end^3 - start^3) / 3 of it
 
     def cut_at(cut: float) -> tuple[np.ndarray, np.ndarray]:
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -272,33 +277,42 @@ def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np
         on_plane = np.where(np.isfinite(plane), plane, t_in)
         return np.where(gone, on_plane, start), np.where(gone, on_plane, end)
 
-    def volume(start: np.ndarray, end: np.ndarray) -> float:
-        """Of the segments, up to a constant: each ray's pyramid holds (end^3 - start^3) / 3 of it."""
-        return float(np.sum(end ** 3 - start ** 3))
-
-    def stands(cut: float) -> bool:
+    def held(cut: float) -> tuple[float, float]:
+        """(how far its base holds its centre of mass inside, m; the centre's height above the cut, m)."""
         start, end = cut_at(cut)
         t = start[:, None] + (end - start)[:, None] * fractions
-        points = rays[:, None, :] * t[..., None]
         weights = t ** 2 * (end - start)[:, None]
         if weights.sum() <= 0:
-            return False
-        centre = np.tensordot(weights, points, axes=([0, 1], [0, 1])) / weights.sum()
+            return -math.inf, 0.0
+        centre = np.tensordot(weights, rays[:, None, :] * t[..., None], axes=([0, 1], [0, 1])) / weights.sum()
         ends = np.concatenate([rays * start[:, None], rays * end[:, None]])
         base = ends[-(ends @ down) <= lowest + cut + layer]
-        return support_margin(np.stack([base @ across, base @ along], axis=1),
-                              np.array([centre @ across, centre @ along])) >= margin
+        inside = support_margin(np.stack([base @ across, base @ along], axis=1),
+                                np.array([centre @ across, centre @ along]))
+        return inside, -(centre @ down) - (lowest + cut)
 
-    if stands(0.0) or not stands(MAX_CUT * tall):
+    def lowest_cut(stands) -> float | None:
+        """The lowest cut within MAX_CUT of the height at which stands(cut) holds (it only grows with the
+        cut, as the base does), None if none; binary search."""
+        if not stands(MAX_CUT * tall):
+            return None
+        low, high = 0.0, MAX_CUT * tall
+        for _ in range(20):
+            middle = 0.5 * (low + high)
+            low, high = (low, middle) if stands(middle) else (middle, high)
+        return high
+
+    if held(0.0)[0] >= margin:
         return t_in, t_out, 0.0
-    low, high = 0.0, MAX_CUT * tall
-    for _ in range(20):  # the support only grows as the plane rises
-        middle = 0.5 * (low + high)
-        low, high = (low, middle) if stands(middle) else (middle, high)
-    start, end = cut_at(high)
-    if volume(start, end) < (1.0 - MAX_CUT_VOLUME) * volume(t_in, t_out):
-        return t_in, t_out, 0.0  # a carve, not a base: a capsule leaning 20 degrees would lose 7 %
-    return start, end, high
+    tilt = math.tan(math.radians(STAND_TILT_DEG))
+    for stands in (lambda c: (lambda inside, h: inside >= max(margin, tilt * h))(*held(c)),
+                   lambda c: held(c)[0] >= margin):
+        cut = lowest_cut(stands)
+        if cut is not None:
+            start, end = cut_at(cut)
+            if float(np.sum(end ** 3 - start ** 3)) >= (1.0 - MAX_CUT_VOLUME) * whole:
+                return start, end, cut
+    return t_in, t_out, 0.0  # a carve, not a base: a capsule leaning 20 degrees would lose 7 %
 
 
 def support_margin(points: np.ndarray, centre: np.ndarray) -> float:

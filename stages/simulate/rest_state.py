@@ -32,6 +32,9 @@ from .constitutive import MIN_STRETCH, lame_parameters
 # a round body's roll on its foot is far softer than its sag (docs/decisions/0002-settle.md).
 RELAXED = 1.0e-7
 SETTLE_PERIODS = 10.0
+# A settle whose kinetic energy has not peaked once in this many periods is still falling: the body
+# touches the ground on too small a contact (a soft ball on its lowest point) to stand as photographed.
+FOOTLESS_PERIODS = 2.0
 # Substeps between takings out of the bodies' drift and spin: it costs about a substep's time (22 ms for
 # 70k particles), and a neutral roll gathers little in this many.
 RIGID_MOTION_EVERY = 10

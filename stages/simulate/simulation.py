@@ -36,6 +36,8 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
+# The settle says how far it has come this often, in seconds.
+SETTLE_LOG_EVERY_S = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
 # An object's solid and its depth prior's body differ by 2-26 % on the examples and photographs measured
@@ -313,13 +315,36 @@ class Simulation:
         bodies = [np.flatnonzero(self.object_id == k) for k in deformable]
         relaxation = rest_state.Relaxation(self.masses, rest_sim, bodies)
         started, steps = time.perf_counter(), 0
-        while steps * dt < rest_state.SETTLE_PERIODS * period:
+        most = math.ceil(rest_state.SETTLE_PERIODS * period / dt)
+        log.info("settling objects %s into their weight: at most %d substeps (%.2f s of relaxation)", deformable,
+                 most, most * dt)
+        reported, footless = started, False
+        while steps < most:
             s.substep(dt)
             steps += 1
             if relaxation.step(s, dt):
                 break
+            if relaxation.peaks == 0 and steps * dt > rest_state.FOOTLESS_PERIODS * period:
+                footless = True  # still falling, pinned: its contact cannot carry it as photographed
+                break
+            if time.perf_counter() - reported > SETTLE_LOG_EVERY_S:
+                reported = time.perf_counter()
+                log.info("settling: %d of at most %d substeps, %d kinetic peaks, the last %.1e of the first "
+                         "(stops below %.0e), %.0f s elapsed, at most ~%.0f s left", steps, most, relaxation.peaks,
+                         relaxation.residual, rest_state.RELAXED, reported - started,
+                         (reported - started) / steps * (most - steps))
         s.pin(False)
         s.hold_yield(False)
+        if footless:
+            s.reset(rest_sim, keep=np.zeros(len(rest_sim), bool))
+            for k in deformable:
+                log.warning("object %d (%s, E = %.3g Pa) touches the ground on too small a contact to carry its "
+                            "weight in its photographed shape (no equilibrium in %.0f of its slowest periods, "
+                            "%.0f s): it starts unstressed and sags into its weight from t = 0, as a soft body "
+                            "set down on a point would. A stiffer material (objects[%d].material.youngs_modulus) "
+                            "sags less", k, self.materials[k].preset, self.materials[k].youngs_modulus,
+                            rest_state.FOOTLESS_PERIODS, time.perf_counter() - started, k)
+            return
         settled = rest_sim + relaxation.displacement  # the deflection the pinned particles were kept from
         sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
         settled_F = s.F.numpy().astype(np.float64)
