@@ -37,7 +37,7 @@ def shapes(pitch: float) -> dict:
     return {"ball": Capsule(centre, np.array([1e-6, 0.0, 0.0]), 0.06),
             "capsule tilted 20 deg": Capsule.tilted(),
             "upright cylinder": UprightCylinder(centre, standing_axes(pitch), 0.05, 0.14),
-            "box turned 35 deg": TurnedBox(centre, standing_axes(pitch, 35.0), np.array([0.06, 0.05, 0.04]))}
+            "box turned 35 deg": TurnedBox(centre, np.array([0.06, 0.05, 0.04]), axes=standing_axes(pitch, 35.0))}
 
 
 def cubes(depth, K: np.ndarray) -> np.ndarray:

@@ -7,7 +7,7 @@ sphere tracing of its signed distance, in float64 numpy.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import cv2
@@ -149,25 +149,11 @@ class UprightCylinder:
 
 
 @dataclass(frozen=True)
-class TurnedBox:
-    """A box standing on the ground, turned about the vertical: ``centre`` (3,) m, ``axes`` (3,3) rows its own
-    x, up, z (standing_axes), ``half`` (3,) m its half sides along them."""
+class TurnedBox(Box):
+    """A box standing on the ground, turned about the vertical: ``centre`` (3,) m, ``half`` (3,) m its half
+    sides along its own axes, ``axes`` (3,3) rows its own x, up, z (standing_axes)."""
 
-    centre: np.ndarray
-    axes: np.ndarray
-    half: np.ndarray
-
-    @property
-    def size_m(self) -> float:
-        """Largest extent: the longest side."""
-        return 2 * float(np.max(self.half))
-
-    @property
-    def volume(self) -> float:
-        return 8 * float(np.prod(self.half))
-
-    def principal_moments(self, density: float) -> np.ndarray:
-        return Box(self.centre, self.half).principal_moments(density)
+    axes: np.ndarray = field(default_factory=lambda: np.eye(3))
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
         return Box(np.zeros(3), self.half).signed_distance((points - self.centre) @ self.axes.T)
