@@ -37,6 +37,16 @@ PRESET_MODELS = {"jelly": M.Jelly, "metal": M.Metal, "sand": M.Sand, "plasticine
                  "snow": M.Snow, "rigid": M.Rigid, "fracture": M.Fracture}
 
 
+def preset_materials(scene, preset: str) -> tuple[list, str]:
+    """Each object's material as `preset` with the preset's defaults, or the scene's own ("scene"), and its
+    label for a table."""
+    if preset != "scene":
+        return [PRESET_MODELS[preset]() for _ in scene.objects], preset
+    materials = [o.material for o in scene.objects]
+    return materials, "scene's: " + ", ".join(
+        f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
+
+
 def drift(sim: Simulation, tr) -> dict:
     """Largest turn (deg), horizontal centre-of-mass travel (m) and sag (m, + down) over the run."""
     m = tr.masses
@@ -69,15 +79,12 @@ def main() -> None:
             physics = physics.model_copy(update={"duration_s": args.duration})
         size = scene.objects[0].size_m
         for preset in args.presets:
-            materials = ([o.material for o in scene.objects] if preset == "scene"
-                         else [PRESET_MODELS[preset]() for _ in scene.objects])
+            materials, label = preset_materials(scene, preset)
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
                              silhouette=(g.mask, g.K), prior_volumes=g.object_volumes, scene_file=scene.file)
             tr = sim.run()
             r = drift(sim, tr)
-            label = preset if preset != "scene" else "scene's: " + ", ".join(
-                f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
             rows.append([folder.name, label, f"{r['turn']:.2f}", f"{1e3 * r['travel']:.2f}",
                          f"{100 * r['travel'] / size:.2f}", f"{1e3 * r['sag']:.2f}", r["substeps"],
                          f"{time.perf_counter() - start:.0f}"])

@@ -29,7 +29,7 @@ from schemas.scene import GroundConfig, Impulse
 from stages.simulate.simulation import Simulation
 
 from benchmarks.figures import add_arguments, invocation, write_figures
-from benchmarks.rest import PRESET_MODELS, drift
+from benchmarks.rest import drift, preset_materials
 
 
 def energy_gain(tr) -> float:
@@ -75,10 +75,7 @@ def main() -> None:
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
         size = scene.objects[0].size_m
         for preset in args.presets:
-            materials = ([o.material for o in scene.objects] if preset == "scene"
-                         else [PRESET_MODELS[preset]() for _ in scene.objects])
-            label = preset if preset != "scene" else "scene's " + ", ".join(
-                f"{m.preset} E={m.youngs_modulus:g}" if hasattr(m, "youngs_modulus") else m.preset for m in materials)
+            materials, label = preset_materials(scene, preset)
             for ground in args.grounds:
                 start = time.perf_counter()
                 sim, tr = toss(scene, gaussians, materials, ground, args.speed, args.duration)

@@ -27,6 +27,7 @@ from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
 from .depth import ObjectDepth, aligned_front, medial_balls
+from .geometry import pixel_rays
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -115,8 +116,8 @@ class FacingView:
 
 def input_rays(mask: np.ndarray, K: np.ndarray) -> np.ndarray:
     """(N,3) camera-frame rays, z = 1, through the centres of the pixels of `mask` (row-major order)."""
-    rows, cols = np.nonzero(mask)
-    return np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))], axis=1) @ np.linalg.inv(K).T
+    rays = pixel_rays(K, *mask.shape)[mask]
+    return rays / rays[:, 2:3]
 
 
 def ray_ball(rays: np.ndarray, centres: np.ndarray, radii: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

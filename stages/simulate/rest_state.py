@@ -25,6 +25,7 @@ import math
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from .conditions import inertia_about_centre
 from .constitutive import MIN_STRETCH, lame_parameters
 
 # The settle stops once a kinetic energy peak is below this fraction of the first (the sag's), and
@@ -118,10 +119,8 @@ class Relaxation:
         self.bodies = bodies
         self.offsets, self.inverse_inertia = [], []
         for members in self.bodies:
-            m, x = self.masses[members], positions[members]
-            r = x - m @ x / m.sum()
-            inertia = np.eye(3) * np.sum(m * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", m, r, r)
-            self.offsets.append(r)
+            centre, inertia = inertia_about_centre(positions[members], self.masses[members])
+            self.offsets.append(positions[members] - centre)
             self.inverse_inertia.append(np.linalg.pinv(inertia))
         self.displacement = np.zeros((len(self.masses), 3))
         self.steps = 0

@@ -24,7 +24,7 @@ from schemas.artifacts import TrajectoriesArtifact
 from schemas.materials import PRESETS
 
 from . import domain, rest_state
-from .conditions import Conditions
+from .conditions import Conditions, inertia_about_centre
 from .constitutive import elastic_energy, wave_speed
 from .fill import carry_volume, fill_object, lattice_spacing, silhouette_gap
 from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
@@ -48,9 +48,7 @@ SOLID_SHARE_WARN = 1.5
 def mass_properties(masses: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(centre of mass (3,) m, sorted principal moments of inertia about it (3,) kg m^2) of point masses
     (P,) kg at points (P,3) m."""
-    centre = masses @ points / masses.sum()
-    r = points - centre
-    inertia = np.eye(3) * np.sum(masses * np.sum(r * r, axis=1)) - np.einsum("p,pi,pj->ij", masses, r, r)
+    centre, inertia = inertia_about_centre(points, masses)
     return centre, np.linalg.eigvalsh(inertia)
 
 
