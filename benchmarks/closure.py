@@ -2,7 +2,7 @@
 
     python -m benchmarks.closure [--widths 192 256] [--pitches 0 20 35] [--no-figures]
 
-Each shape (stages/reconstruct/synthetic.py: a 12 cm ball, the 25 cm capsule tilted 20 degrees in the
+Each shape (testing/photographs.py: a 12 cm ball, the 25 cm capsule tilted 20 degrees in the
 picture, an upright cylinder 10 cm across and 14 cm tall, a 12 x 10 x 8 cm box turned 35 degrees, both
 standing) is ray-cast 0.6 m away on the optical axis of a camera pitched down by each pitch, at each
 photograph width (4:3, 40 degree field of view). Its body is what pm-reconstruct's closure.object_depths
@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 from benchmarks.figures import add_arguments, invocation, write_figures  # noqa: E402
 from stages.reconstruct.closure import down_direction, object_depths  # noqa: E402
 from stages.reconstruct.geometry import intrinsics_from_fov  # noqa: E402
-from stages.reconstruct.synthetic import Capsule, TurnedBox, UprightCylinder, photograph, standing_axes  # noqa: E402
+from testing.photographs import Capsule, TurnedBox, UprightCylinder, photograph, standing_axes  # noqa: E402
 
 DENSITY = 1000.0
 CUBE_M = 0.002

@@ -32,7 +32,7 @@ import warp as wp  # noqa: E402
 from schemas import materials as M  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.simulate.simulation import Simulation  # noqa: E402
-from stages.simulate.synthetic import boxes  # noqa: E402
+from testing.particles import boxes  # noqa: E402
 
 
 @wp.kernel

@@ -27,7 +27,7 @@ from schemas.diffusion import DiffusionSettings  # noqa: E402
 from stages.enhance.diffusion.components import Components  # noqa: E402
 from stages.enhance.diffusion.inversion import inverse_scheduler, invert_video, stored_timesteps  # noqa: E402
 from stages.enhance.diffusion.sampling import sample  # noqa: E402
-from stages.enhance.diffusion.testing import full_size_components, tiny_components  # noqa: E402
+from testing.tiny_diffusion import full_size_components, tiny_components  # noqa: E402
 
 
 def _sync(device: torch.device) -> None:

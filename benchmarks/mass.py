@@ -4,7 +4,7 @@
     python -m benchmarks.mass --off-axis [--balls 120] [--no-figures]
 
 Each shape (a 12 cm ball 0.6 m away, a 20 cm ball 0.35 m away, the 25 cm capsule tilted 20 degrees, a
-14 x 9 x 9 cm box seen face on) is ray-cast by stages/reconstruct/synthetic.py at each photograph width,
+14 x 9 x 9 cm box seen face on) is ray-cast by testing/photographs.py at each photograph width,
 reconstructed by pm-reconstruct and filled as pm-simulate fills it (grown to the photograph's silhouette,
 its particles carrying the volume its depth prior encloses). Printed: the solid's volume and its principal moments of inertia
 (density 1000) over the analytic ones and the particle count.
@@ -36,7 +36,7 @@ from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.reconstruct.cli import main as reconstruct  # noqa: E402
 from stages.reconstruct.closure import object_depths  # noqa: E402
 from stages.reconstruct.geometry import intrinsics_from_fov  # noqa: E402
-from stages.reconstruct.synthetic import Box, Capsule, photograph, write_scene  # noqa: E402
+from testing.photographs import Box, Capsule, photograph, write_scene  # noqa: E402
 from stages.simulate.simulation import Simulation, mass_properties  # noqa: E402
 
 RHO = 1000.0
@@ -89,7 +89,7 @@ def main() -> None:
     if not args.no_figures:
         write_figures(
             "mass", "Mass and inertia",
-            f"""The simulated solid of shapes ray-cast by stages/reconstruct/synthetic.py and reconstructed by
+            f"""The simulated solid of shapes ray-cast by testing/photographs.py and reconstructed by
             pm-reconstruct ({args.iterations} iterations) over the analytic solid (density 1000): its volume and
             principal moments of inertia. The shapes: a 12 cm ball 0.6 m from a 40 degree camera, a 20 cm ball
             0.35 m from a 60 degree one (near ball), the 25 cm capsule tilted 20 degrees, a 14 x 9 x 9 cm box

@@ -32,7 +32,7 @@ from schemas.materials import Fracture, Jelly, Rigid  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver  # noqa: E402
 from stages.simulate.simulation import Simulation  # noqa: E402
-from stages.simulate.synthetic import boxes  # noqa: E402
+from testing.particles import boxes  # noqa: E402
 
 
 GRID = 64

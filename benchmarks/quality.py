@@ -42,7 +42,7 @@ from stages.enhance.compositing import blend_over_background, resize_to, unpremu
 from stages.reconstruct.metrics import iou, masked_psnr, median_relative_error  # noqa: E402
 from stages.reconstruct.optimize import Settings  # noqa: E402
 from stages.reconstruct.pipeline import optimize_scene, prepare  # noqa: E402
-from stages.reconstruct.synthetic import Capsule, photograph, side_view, write_scene  # noqa: E402
+from testing.photographs import Capsule, photograph, side_view, write_scene  # noqa: E402
 from stages.reconstruct.views import input_view  # noqa: E402
 
 
@@ -209,7 +209,7 @@ SECTIONS = {
                     mask's coverage, at the optimisation resolution, over the object's pixels) and the runtime from
                     segmentation to the optimised Gaussians, file not written. On a synthetic capsule (0.25 m long,
                     0.05 m radius, tilted 20 degrees in the image plane, 0.6 m away, ray-cast by
-                    stages/reconstruct/synthetic.py), with hard depth on and off: the median relative error of the
+                    testing/photographs.py), with hard depth on and off: the median relative error of the
                     rendered depth (depth / alpha where alpha > 0.5) against the ray-cast distance, the IoU of the
                     side view's silhouette (alpha > 0.5 from azimuth 90 degrees) against the true one, the floater
                     mass (summed opacity of Gaussians farther than 2 % of size_m from the true surface) and the

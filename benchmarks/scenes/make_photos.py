@@ -18,6 +18,8 @@ import skimage.data
 from schemas.images import write_image
 
 HERE = Path(__file__).parent
+LOAF = (210, 175, 150, 62)
+"""The loaf's superellipse |(x - cx) / ax|^3 + |(y - cy) / ay|^3 < 1: (cx, cy, ax, ay), pixels."""
 
 
 def loaf(height: int = 300, width: int = 420) -> np.ndarray:
@@ -27,7 +29,7 @@ def loaf(height: int = 300, width: int = 420) -> np.ndarray:
     image = np.stack([0.55 * table + 60, 0.5 * table + 50, 0.45 * table + 40], -1)
     grain = cv2.resize(skimage.data.gravel(), (width, height)).astype(np.float32)[..., None] / 255
     y, x = np.mgrid[0:height, 0:width]
-    cx, cy, ax, ay = 210, 175, 150, 62
+    cx, cy, ax, ay = LOAF
     inside = np.abs((x - cx) / ax) ** 3 + np.abs((y - cy) / ay) ** 3 < 1
     light = np.clip(1.1 - 0.6 * (y - (cy - ay)) / (2 * ay), 0.4, 1.2)[..., None]
     crust = (np.array([40, 110, 170]) + np.array([60, 70, 70]) * grain) * light

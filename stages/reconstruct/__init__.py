@@ -9,6 +9,6 @@ Pipeline (each step its own module; pipeline.py chains them, cli.py writes gauss
   views      the supervised views: the input view and extra views (Eq. 9)
   losses     colour (Eq. 10) and hard-depth (Eq. 7-8) losses
   optimize   the optimisation through splat with the paper's schedule
-Helpers: geometry (cameras), local_model (local model loading), metrics and
-synthetic (a ray-cast capsule: ground truth for tests and benchmarks/quality.py).
+Helpers: geometry (cameras), local_model (local model loading), metrics. The ray-cast
+shapes that tests and benchmarks take for ground truth are in testing/photographs.py.
 """

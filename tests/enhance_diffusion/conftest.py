@@ -9,7 +9,7 @@ import torch
 import yaml
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, write_artifact
-from stages.enhance.diffusion.testing import save_tiny_models, tiny_components
+from testing.tiny_diffusion import save_tiny_models, tiny_components
 
 SIZE = 64  # coarse frames and photo: 64 x 64 px -> 8 x 8 latents
 FRAMES = 3

@@ -8,7 +8,7 @@ from schemas.diffusion import DiffusionSettings
 from stages.enhance.diffusion.components import Components
 from stages.enhance.diffusion.inversion import CLEAN, inverse_scheduler, invert, stored_timesteps
 from stages.enhance.diffusion.sampling import sample, sampling_timesteps
-from stages.enhance.diffusion.testing import tiny_components
+from testing.tiny_diffusion import tiny_components
 
 
 @dataclasses.dataclass

@@ -3,7 +3,7 @@ import numpy as np
 import torch
 
 from stages.enhance.diffusion.lora import add_lora, diffusion_loss, load_lora, save_lora, training_images
-from stages.enhance.diffusion.testing import tiny_components
+from testing.tiny_diffusion import tiny_components
 
 
 def test_a_training_step_lowers_the_loss_on_its_batch():

@@ -13,7 +13,7 @@ from stages.enhance.diffusion.invert_cli import main as invert_main
 from stages.enhance.diffusion.lora_cli import main as lora_main
 from stages.enhance.diffusion.models import load_components
 from stages.enhance.diffusion.pipeline import enhance_frames, invert_frames, video_inputs
-from stages.enhance.diffusion.testing import tiny_components
+from testing.tiny_diffusion import tiny_components
 
 
 FRAMES, SIZE = 3, 64  # of the coarse video the scene_inputs fixture writes

@@ -12,7 +12,7 @@ from stages.reconstruct.cli import main
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
 from stages.reconstruct.optimize import LOSS_TERMS
-from stages.reconstruct.synthetic import Capsule, photograph, side_view, write_scene
+from testing.photographs import Capsule, photograph, side_view, write_scene
 
 ITERATIONS = 24  # hard depth from iteration 4 at multiples of 10: iterations 10 and 20
 

@@ -1,6 +1,6 @@
 """The unseen half: the medial-ball body continues the seen front, and stands on its base.
 
-References: ray-cast balls and capsules of known volume, inertia and centre (stages/reconstruct/synthetic.py),
+References: ray-cast balls and capsules of known volume, inertia and centre (testing/photographs.py),
 and a support computed independently of the closure (the hull of the body's lowest points).
 """
 from __future__ import annotations
@@ -12,7 +12,7 @@ from scipy.spatial import ConvexHull
 from stages.reconstruct.closure import ball_depths, down_direction, object_depths
 from stages.reconstruct.depth import ObjectDepth
 from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
-from stages.reconstruct.synthetic import Capsule, photograph
+from testing.photographs import Capsule, photograph
 
 
 def body_samples(depth, K, samples: int = 16) -> tuple[np.ndarray, np.ndarray]:

@@ -8,7 +8,7 @@ from stages.reconstruct.closure import object_depths
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lift import lift_object
 from stages.reconstruct.metrics import iou
-from stages.reconstruct.synthetic import Capsule, photograph, side_view
+from testing.photographs import Capsule, photograph, side_view
 
 
 @pytest.fixture(scope="module")

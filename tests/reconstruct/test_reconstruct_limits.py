@@ -12,7 +12,7 @@ from stages.reconstruct import pipeline
 from stages.reconstruct.cli import check_result, main
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
-from stages.reconstruct.synthetic import Capsule, write_scene
+from testing.photographs import Capsule, write_scene
 
 
 @pytest.mark.parametrize("segmentation", ["mask", "box"])

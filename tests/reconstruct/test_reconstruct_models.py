@@ -8,7 +8,7 @@ from transformers import (DPTConfig, DPTForDepthEstimation, DPTImageProcessor, S
 from schemas import InputError
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from stages.reconstruct.cli import main
-from stages.reconstruct.synthetic import Capsule, write_scene
+from testing.photographs import Capsule, write_scene
 from stages.reconstruct.depth import DptDepth, unit_distance_shape
 from stages.reconstruct.segment import SamSegmenter
 

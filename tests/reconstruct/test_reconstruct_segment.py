@@ -10,7 +10,7 @@ from stages.reconstruct.background import EXEMPLAR_MAX_PX, SEAM_WIDTH, dilation_
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.metrics import iou
 from stages.reconstruct.segment import ObjectSpec, segment_objects
-from stages.reconstruct.synthetic import Capsule, photograph
+from testing.photographs import Capsule, photograph
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Bodies weigh what their size says: the simulated solid of reconstructed synthetic shapes against analytic values.
 
-Each shape is ray-cast (stages/reconstruct/synthetic.py), reconstructed by pm-reconstruct at 96 x 72 to
+Each shape is ray-cast (testing/photographs.py), reconstructed by pm-reconstruct at 96 x 72 to
 256 x 192 px (100 iterations, 5-15 s) and filled as pm-simulate fills it (grown to the photograph's
 silhouette, its particles carrying the volume its depth prior encloses).
 """
@@ -14,9 +14,9 @@ from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.program import InputError
 from schemas.scene import PhysicsConfig
 from stages.reconstruct.cli import main as reconstruct
-from stages.reconstruct.synthetic import Box, Capsule, write_scene
+from testing.photographs import Box, Capsule, write_scene
 from stages.simulate.simulation import Simulation, mass_properties
-from stages.simulate.synthetic import box_surface
+from testing.particles import box_surface
 
 DENSITY = 1000.0  # the presets' default
 

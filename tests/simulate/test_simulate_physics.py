@@ -17,7 +17,7 @@ from schemas import materials as M
 from schemas.scene import PhysicsConfig
 from stages.simulate.crack_fields import crack_contact
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import boxes, fibonacci_sphere
+from testing.particles import boxes, fibonacci_sphere
 
 G = 9.81
 CUBE = ((0.0, 0.0, 0.0), (0.1, 0.1, 0.1))

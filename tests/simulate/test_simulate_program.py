@@ -16,7 +16,7 @@ from stages.simulate import cli, domain
 from stages.simulate.conditions import region_members
 from stages.simulate.fill import carry_volume, fill_object, silhouette_gap
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import box_surface, boxes, fibonacci_sphere
+from testing.particles import box_surface, boxes, fibonacci_sphere
 
 wp.config.quiet = True
 

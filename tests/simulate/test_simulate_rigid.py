@@ -19,7 +19,7 @@ from schemas.artifacts import TrajectoriesArtifact, read_artifact
 from schemas.scene import PhysicsConfig
 from stages.simulate import cli
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import box_surface, boxes, fibonacci_sphere
+from testing.particles import box_surface, boxes, fibonacci_sphere
 
 from .test_simulate_program import make_gaussians
 

@@ -1,6 +1,6 @@
 """A body tossed straight up comes down where it went up: reconstructed synthetic balls, not hand-placed spheres.
 
-A 12 cm ball is ray-cast (stages/reconstruct/synthetic.py) under a level and a pitched camera, reconstructed
+A 12 cm ball is ray-cast (testing/photographs.py) under a level and a pitched camera, reconstructed
 by pm-reconstruct from a 192 x 144 photograph, and tossed straight up (against gravity) at 1.2 m/s. Over 1 s
 its centre of mass may drift along the ground by at most 2 % of its size and it may turn at most 3 degrees;
 its total energy (trajectories' kinetic + potential diagnostics) never rises above its value just after the
@@ -18,7 +18,7 @@ from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.scene import PhysicsConfig
 from stages.reconstruct.cli import main as reconstruct
-from stages.reconstruct.synthetic import Capsule, write_scene
+from testing.photographs import Capsule, write_scene
 from stages.simulate.rest_state import turn_deg
 from stages.simulate.simulation import Simulation
 

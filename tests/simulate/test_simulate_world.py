@@ -16,7 +16,7 @@ from schemas.program import InputError
 from schemas.scene import PhysicsConfig
 from stages.simulate import rest_state
 from stages.simulate.simulation import Simulation
-from stages.simulate.synthetic import box_surface, fibonacci_sphere
+from testing.particles import box_surface, fibonacci_sphere
 
 G = 9.81
 SIZE = 0.1

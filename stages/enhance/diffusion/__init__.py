@@ -4,7 +4,8 @@ coarse/enhanced sampling with feature injection and keyframe attention.
 
 Modules: models (finding and loading weights), components (the loaded models' calls),
 conditioning (control images), inversion, attention + injection (processors and hooks),
-keyframes (Eq. 14-15), sampling, lora, pipeline (artifacts to frames), testing (tiny models).
+keyframes (Eq. 14-15), sampling, lora, pipeline (artifacts to frames). Tiny random-weight
+models for tests are in testing/tiny_diffusion.py.
 """
 from .pipeline import enhance_video, make_latents
 

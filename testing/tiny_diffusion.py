@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from .components import Components
+from stages.enhance.diffusion.components import Components
 
 SD21_SCHEDULER = dict(beta_start=0.00085, beta_end=0.012, beta_schedule="scaled_linear", clip_sample=False,
                       set_alpha_to_one=False, steps_offset=1, num_train_timesteps=1000)

@@ -15,7 +15,7 @@ import numpy as np
 
 from schemas.images import write_image
 
-from .geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays
+from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays
 
 
 @dataclass(frozen=True)
