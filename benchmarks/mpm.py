@@ -11,7 +11,10 @@ sticky ground; the time per substep is the best of `repeats` runs of `steps`
 substeps after a warm-up, once with one CPU thread and once with the default
 (two on a 2-core CPU). The second table tosses a 10 cm cube (Gaussians 5 mm apart on its faces, the
 fill at 8 particles per cell of a 48-cell grid) 1 m/s up from friction ground for 1 s, as jelly
-(E = 5e4 Pa) and as rigid: a rigid body has no elastic wave to bound its substep.
+(E = 5e4 Pa) and as rigid: a rigid body has no elastic wave to bound its substep. The third
+sets a scene's substep (Simulation.run: conditions, the grid that follows, rigid bodies, free flight,
+diagnostics every frame) against the bare solver's (MPMSolver.substep alone) at the same particles,
+grid and substep size. `--only scene` runs that table alone.
 
 Each table goes to benchmarks/results/mpm*.json (``_cuda`` appended on a GPU), and RESULTS.md is regenerated.
 """
@@ -31,6 +34,7 @@ from benchmarks.figures import add_arguments, invocation, write_figures  # noqa:
 from schemas.materials import Fracture, Jelly, Rigid  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.simulate.mpm import GROUND_STICKY, Grid, Ground, MPMSolver  # noqa: E402
+from stages.simulate.rigid import RigidBodies  # noqa: E402
 from stages.simulate.simulation import Simulation  # noqa: E402
 from testing.particles import boxes  # noqa: E402
 
@@ -78,6 +82,8 @@ def print_table(columns: list[str], rows: list[list]) -> None:
 
 
 RIGID_COLUMNS = ["preset", "particles", "substeps in 1 s", "seconds"]
+SCENE_COLUMNS = ["scene", "particles", "grid", "substeps", "scene ms / substep", "bare solver ms / substep",
+                 "scene / bare"]
 FALL_COLUMNS = ["fall", "frames", "largest error / (g t^2 / 2)", "at t", "error at 1 s", "grid cells moved"]
 
 
@@ -93,6 +99,44 @@ def rigid_against_jelly(device: str) -> list[list]:
         trajectories = sim.run()
         label = "jelly (E = 5e4 Pa)" if material.preset == "jelly" else material.preset
         rows.append([label, len(sim.masses), int(trajectories.substeps.sum()), f"{time.perf_counter() - start:.1f}"])
+    return rows
+
+
+def scene_against_solver(device: str, repeats: int) -> list[list]:
+    """Rows of a scene's substep (Simulation.run, settle excluded, over its substeps) against the bare
+    solver's (MPMSolver.substep on the same particles, grid and substep size, best of `repeats`)."""
+    means, object_id = boxes(((0.0, 0.0, 0.4), (0.1, 0.1, 0.5)), spacing=0.005)
+    pushed = [{"type": "fixed", "region": {"box": [0, 0.85, 0, 1, 1, 1]}},
+              {"type": "force", "region": {"box": [0, 0, 0, 0.4, 0.4, 1]}, "force": [0.5, 0, 0], "end_s": 0.15}]
+    tossed = [{"type": "impulse", "velocity": [0.0, -1.0, 0.0]}]
+    rows = []
+    for label, material, conditions in (("jelly (E = 5e4 Pa), top held, pushed", Jelly(youngs_modulus=5e4), pushed),
+                                        ("rigid, tossed", Rigid(), tossed)):
+        physics = PhysicsConfig(duration_s=0.25, fps=24, grid=48, ground={"type": "friction", "friction": 0.5},
+                                conditions=conditions)
+        sim = Simulation(physics, [material], means, object_id, device=device)
+        start = time.perf_counter()
+        trajectories = sim.run()
+        wp.synchronize_device(device)
+        substeps = int(trajectories.substeps.sum())
+        scene = (time.perf_counter() - start - sim.settled.wall_s) / substeps
+        h = physics.duration_s / substeps
+        solver = MPMSolver(sim.grid, sim.rest_sim, sim.masses, sim.volumes, sim.object_id, sim.materials,
+                           sim.Q @ sim.gravity_world, sim.ground, device=device)
+        if material.preset == "rigid":
+            solver.attach_rigid(RigidBodies(sim.rest_sim, sim.masses, sim.object_id, {0: material}, sim.ground,
+                                            0.5 * sim.spacing, device))
+        bare = float("inf")
+        for _ in range(repeats):
+            wp.synchronize_device(device)
+            begin = time.perf_counter()
+            for _ in range(substeps):
+                solver.substep(h)
+            wp.synchronize_device(device)
+            bare = min(bare, (time.perf_counter() - begin) / substeps)
+        solver.close()
+        rows.append([label, len(sim.masses), "x".join(map(str, sim.grid.shape)), substeps, f"{1e3 * scene:.2f}",
+                     f"{1e3 * bare:.2f}", f"{scene / bare:.2f}"])
     return rows
 
 
@@ -116,11 +160,27 @@ def main() -> None:
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--steps", type=int, default=40)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--only", choices=["scene"], default=None, help="run the scene-against-solver table alone")
     add_arguments(parser)
     args = parser.parse_args()
     wp.config.quiet = True
     wp.init()
     cpu = wp.get_device(args.device).is_cpu
+    suffix, command, on = "" if cpu else "_cuda", invocation(__file__), "" if cpu else " on CUDA"
+    scene = scene_against_solver(args.device, args.repeats)
+    print_table(SCENE_COLUMNS, scene)
+    print()
+    if not args.no_figures:
+        write_figures(
+            "mpm_scene" + suffix, "A scene's substep against the bare solver's" + on,
+            """A 10 cm cube (Gaussians 5 mm apart on its faces, the fill at 8 particles per cell of a 48-cell
+            grid) simulated for 0.25 s by Simulation.run (its conditions, the grid that follows, rigid bodies,
+            free flight, the diagnostics of every frame), as jelly with its top held and its lower corner
+            pushed, and as rigid tossed up: wall seconds per substep, the settle left out, against
+            MPMSolver.substep alone on the same particles, grid and substep size (best of the repeats).
+            Target: at most 1.3 times.""", command, SCENE_COLUMNS, scene, device=args.device)
+    if args.only == "scene":
+        return
     columns = ["material", "particles", "grid", "threads" if cpu else "device", "ms / substep",
                "million particle-substeps / s"]
     print("| " + " | ".join(columns) + " |")
@@ -141,8 +201,6 @@ def main() -> None:
     print_table(FALL_COLUMNS, fall)
     if args.no_figures:
         return
-    suffix, command = "" if cpu else "_cuda", invocation(__file__)
-    on = "" if cpu else " on CUDA"
     write_figures(
         "mpm" + suffix, "MLS-MPM substep" + on,
         f"""Time of one MLS-MPM substep (P2G, the grid update over the particles' node box, G2P, the return

@@ -70,31 +70,44 @@ def condition_frame(condition, gravity_frame_rows: np.ndarray) -> np.ndarray:
     return np.eye(3) if condition.frame == "camera" else gravity_frame_rows
 
 
-def fit_grid(rest_sim: np.ndarray, cells: int, *, ground_y: float | None, walls: bool) -> Grid:
-    """Grid over the rest particles with room for them to deform: half the objects' size on each
-    side (a heap spreads, a body tips over), a quarter above and, without a ground, below; with
-    walls a quarter all round (the walls are its faces).
+def _margins(size: float, ground: bool, walls: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Room (m, below and above along each axis) around objects of `size` m for them to deform: half
+    their size on each side (a heap spreads, a body tips over), a quarter above and, without a ground,
+    below; with walls a quarter all round (the walls are its faces)."""
+    low = np.full(3, 0.25 * size if walls else 0.5 * size)
+    high = low.copy()
+    high[1] = low[1] = 0.25 * size
+    if ground:
+        low[1] = 0.0
+    return low, high
+
+
+def cell_size(points_sim: np.ndarray, cells: int, *, ground: bool, walls: bool) -> float:
+    """Cell size in m of a grid of `cells` cells along the longest side of the domain around the points
+    (N,3, simulation frame, m) with room for them to deform (`fit_grid`).
+
+    Travel needs no room: without walls the grid follows the particles by whole cells
+    (mpm.MPMSolver.follow), so the cell size is set by the objects alone and a fast condition
+    cannot dilute the resolution."""
+    lo, hi = points_sim.min(axis=0), points_sim.max(axis=0)
+    low, high = _margins(float(max(hi - lo)), ground, walls)
+    return float(max((hi - lo) + low + high)) / cells
+
+
+def fit_grid(rest_sim: np.ndarray, dx: float, *, ground_y: float | None, walls: bool) -> Grid:
+    """Grid of `dx` m cells over the rest particles with room for them to deform (`cell_size`).
 
     Args:
         rest_sim: (P,3) rest positions in the simulation frame, m.
-        cells: grid cells along the longest side of the domain (physics.grid).
+        dx: cell size, m.
         ground_y: height of the ground plane (simulation frame, m; the lowest rest point), or None
             without a ground.
         walls: close the domain tightly around the objects.
 
-    Travel needs no room: without walls the grid follows the particles by whole cells
-    (mpm.MPMSolver.follow), so the cell size is set by the objects alone and a fast condition
-    cannot dilute the resolution. The ground lies exactly on a node plane.
+    The ground lies exactly on a node plane.
     """
     lo, hi = rest_sim.min(axis=0), rest_sim.max(axis=0)
-    size = float(max(hi - lo))
-    margin_lo = np.full(3, 0.25 * size if walls else 0.5 * size)
-    margin_hi = margin_lo.copy()
-    margin_hi[1] = margin_lo[1] = 0.25 * size
-    if ground_y is not None:
-        margin_lo[1] = 0.0
-    extent = (hi - lo) + margin_lo + margin_hi
-    dx = float(max(extent)) / cells
+    margin_lo, margin_hi = _margins(float(max(hi - lo)), ground_y is not None, walls)
     origin = lo - margin_lo - BOUNDARY_NODES * dx
     if ground_y is not None:  # the ground on a node plane, the points below it (its contact patch) on the grid
         origin[1] = ground_y - (BOUNDARY_NODES + math.ceil((ground_y - lo[1]) / dx - 1e-9)) * dx

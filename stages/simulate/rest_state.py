@@ -15,24 +15,50 @@ starts from it at rest. A settle that lets the bodies move finds the
 equilibrium of the sagged body instead, which on a narrow foot is another pose
 (docs/decisions/0002-settle.md).
 
+The settle is paid only where it matters (`why_not_settled`,
+docs/decisions/0020-settle-where-it-matters.md): a body whose static sag
+rho g H^2 / (2 E) is under a tenth of a grid cell starts unstressed (its fall
+into its weight is smaller than the grid resolves), sand never settles (a
+heap has no elastic shape to hold), and a body tossed off the ground at t = 0
+carries no load. It lasts at most SETTLE_SHARE of the run's substeps.
+
 The ground lies through the objects' lowest point (simulation.py): a body
 stands because its base carries it, and `support_margin` says whether it does.
+The `warn_*` functions say, before and after the settle, where a body cannot
+stand as photographed.
 """
 from __future__ import annotations
 
+import logging
 import math
+from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
 from scipy.spatial import ConvexHull, QhullError
 
 from .conditions import inertia_about_centre
 from .constitutive import MIN_STRETCH, lame_parameters
+
+log = logging.getLogger("physmotion.simulate")
 
 # The settle stops once a kinetic energy peak is below this fraction of the first (the sag's), and
 # lasts at most this many periods of the slowest body's fundamental mode. The fraction is small because
 # a round body's roll on its foot is far softer than its sag (docs/decisions/0002-settle.md).
 RELAXED = 1.0e-7
 SETTLE_PERIODS = 10.0
+# ... and at most this share of the run's substeps, but never fewer than MIN_PERIODS periods, which
+# carry the sag's first peaks (docs/decisions/0020-settle-where-it-matters.md).
+SETTLE_SHARE = 0.2
+MIN_PERIODS = 4.0
+# A body whose column sag under its weight is below this many grid cells is not settled: started
+# unstressed it falls into its weight by twice that, which the grid does not resolve.
+SAG_CELLS = 0.1
+# Held up in its photographed shape, a body that stands gives way by its static deflection; one whose
+# settle moved it by more than this many times an elastic column's sag (plus a tenth of a cell), or
+# turned it by more than TURN_DEG, is giving way and is named.
+GIVING_WAY_FACTOR = 3.0
+TURN_DEG = 1.0
 # A settle whose kinetic energy has not peaked once in this many periods is still falling: the body
 # touches the ground on too small a contact (a soft ball on its lowest point) to stand as photographed.
 FOOTLESS_PERIODS = 2.0
@@ -94,6 +120,137 @@ def fundamental_period(material, height: float, thickness: float) -> float:
     return max(shear, bending)
 
 
+@dataclass
+class Settled:
+    """What Simulation.settle found."""
+
+    bodies: list[int] = field(default_factory=list)
+    """Objects settled into their weight in the photographed shape."""
+    skipped: dict[int, str] = field(default_factory=dict)
+    """Objects on the ground or held that start unstressed, and why (`why_not_settled`)."""
+    footless: list[int] = field(default_factory=list)
+    """Settled objects with no equilibrium as photographed (`warn_footless`): they start unstressed."""
+    giving_way: list[int] = field(default_factory=list)
+    """Settled objects still giving way when the settle ended (`warn_giving_way`)."""
+    substeps: int = 0
+    relaxation_s: float = 0.0
+    """Simulated seconds of relaxation."""
+    peaks: int = 0
+    """Kinetic energy peaks, each one's energy taken out."""
+    residual: float = 0.0
+    """The last peak's kinetic energy over the first's."""
+    sag: float = 0.0
+    """Largest downward deflection (m) that the pinned particles were kept from."""
+    wall_s: float = 0.0
+
+
+def why_not_settled(material, height: float, cell: float, gravity: float, lifted: bool) -> str | None:
+    """Why a deformable body `height` m tall, on the ground or held, starts unstressed (None: it settles).
+
+    Sand has no elastic shape to hold (a heap finds its slope in the run); a body tossed off the ground at
+    t = 0 (`lifted`) carries no load; and a body whose column sag rho g H^2 / (2 E) (gravity m/s^2) is
+    under SAG_CELLS of a `cell` m grid cell falls into its weight by less than the grid resolves."""
+    if material.preset == "sand":
+        return "sand: a heap has no elastic shape to hold, it finds its slope in the run"
+    if lifted:
+        return "tossed off the ground at t = 0, it carries no load"
+    sag = column_sag(material, height, gravity)
+    if sag < SAG_CELLS * cell:
+        return (f"its sag under its weight, rho g H^2 / 2E = {1e3 * sag:.3g} mm, is under {SAG_CELLS:g} of a "
+                f"{1e3 * cell:.2f} mm cell")
+    return None
+
+
+def warn_crushed_by_weight(k: int, material, height: float, gravity: float) -> None:
+    """Say so when object k's weight presses its base (rho g H, a column `height` m tall) past its yield stress."""
+    yield_stress = getattr(material, "yield_stress", None)
+    pressure = material.density * gravity * height
+    if yield_stress and pressure > yield_stress:
+        log.warning("object %d (%s) is %.0f mm tall: its weight presses its base with about rho g H = %.3g Pa, "
+                    "above its yield_stress %.3g Pa, so it will slump under its own weight as a column of this "
+                    "material would. To keep its shape raise objects[%d].material.yield_stress above %.3g Pa, or "
+                    "make size_m smaller", k, material.preset, 1e3 * height, pressure, yield_stress, k, pressure)
+
+
+def warn_unsupported(k: int, x: np.ndarray, centre: np.ndarray, ground_y: float, spacing: float) -> None:
+    """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame, m)
+    up: its centre of mass lies outside the hull of its points within a lattice `spacing` of the ground
+    (its contact patch, as the ground's nodes meet it), so it tips over at t = 0."""
+    if not np.any(x[:, 1] <= ground_y + 0.5 * spacing):
+        return  # in flight
+    foot = x[:, 1] <= ground_y + spacing
+    margin = support_margin(x[foot][:, [0, 2]], centre[[0, 2]])
+    if margin >= spacing:
+        return
+    where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge" % (1e3 * margin)
+             ) if math.isfinite(margin) else "over a line of contact, not an area"
+    log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its points "
+                "within %.1f mm of the ground) holds its centre of mass %s, so it tips over from t = 0 as that "
+                "shape would, rigid too. If the photographed object stands, its reconstruction is too thin or "
+                "leans where the photograph does not show it: hold its foot with a `fixed` condition "
+                "(physics.conditions) or add reconstruct.extra_views", k, 1e3 * spacing, where)
+
+
+def warn_overstressed(k: int, material, rest: np.ndarray, F: np.ndarray, masses: np.ndarray) -> None:
+    """Say so when more than OVERSTRESSED_SHARE of object k's mass (masses (N,) kg at rest points (N,3), settled
+    elastic F (N,3,3)) stands past its yield stress."""
+    if not getattr(material, "yield_stress", None):  # metal, plasticine and foam yield by von Mises
+        return
+    stress = von_mises_stress(F, material)
+    over = stress > material.yield_stress
+    share = float(masses[over].sum() / masses.sum())
+    if share <= OVERSTRESSED_SHARE:
+        return
+    heights = 1e3 * (rest[:, 1] - rest[:, 1].min())
+    log.warning("object %d (%s): standing under its own weight as photographed, %.1f %% of its mass is stressed "
+                "past its yield_stress %.3g Pa (up to %.3g Pa, %.0f to %.0f mm above its lowest point), so it "
+                "yields there in the run and may sag, lean or fall as a body of this material would. To keep "
+                "its shape raise objects[%d].material.yield_stress above %.3g Pa, or make size_m smaller", k,
+                material.preset, 100 * share, material.yield_stress, stress.max(), heights[over].min(),
+                heights[over].max(), k, np.percentile(stress, 100 * (1 - OVERSTRESSED_SHARE)))
+
+
+def warn_giving_way(k: int, material, rest: np.ndarray, settled: np.ndarray, masses: np.ndarray, seconds: float,
+                    gravity: float, cell: float) -> bool:
+    """Name object k and return True when, held in its photographed shape for `seconds` of settle, it was
+    still giving way: it went (settled (N,3) against rest (N,3) m, masses (N,) kg) more than GIVING_WAY_FACTOR
+    times an elastic column's sag of its height (plus SAG_CELLS of a `cell`) down, or turned more than
+    TURN_DEG. A body that moved less stands, whether or not its relaxation reached RELAXED."""
+    height = float(np.ptp(rest[:, 1]))
+    column = column_sag(material, height, gravity)
+    sag = float(np.max(rest[:, 1] - settled[:, 1]))
+    turn = turn_deg(rest, settled, masses)
+    if sag <= GIVING_WAY_FACTOR * column + SAG_CELLS * cell and turn <= TURN_DEG:
+        return False
+    log.warning("object %d (%s, E = %.3g Pa) did not come to rest under its own weight in %.2f s: held in its "
+                "photographed shape it was still giving way, %.1f mm of sag and %.1f degrees of turn, where an "
+                "elastic column of its %.0f mm height sags %.2f mm. In the run it may go on sagging, buckle or tip "
+                "over. A stiffer material (objects[%d].material.youngs_modulus%s), a smaller size_m or preset "
+                "rigid holds it up", k, material.preset, material.youngs_modulus, seconds, 1e3 * sag, turn,
+                1e3 * height, 1e3 * column, k, " or yield_stress" if getattr(material, "yield_stress", None) else "")
+    return True
+
+
+def warn_footless(k: int, material, periods: float, seconds: float) -> None:
+    """Name object k, whose pinned settle found no kinetic peak in `periods` of its slowest mode (`seconds` of
+    wall time): it touches the ground on too small a contact to carry its weight as photographed."""
+    log.warning("object %d (%s, E = %.3g Pa) touches the ground on too small a contact to carry its weight in its "
+                "photographed shape (no equilibrium in %.0f of its slowest periods, %.0f s): it starts unstressed "
+                "and sags into its weight from t = 0, as a soft body set down on a point would. A stiffer material "
+                "(objects[%d].material.youngs_modulus) sags less", k, material.preset, material.youngs_modulus,
+                periods, seconds, k)
+
+
+@wp.kernel
+def relaxation_sums(v: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), dt: float,
+                    displacement: wp.array(dtype=wp.vec3), kinetic: wp.array(dtype=wp.float64)):
+    """displacement_p += dt v_p, and the kinetic energy sum m_p |v_p|^2 / 2 into kinetic[0] (J)."""
+    p = wp.tid()
+    u = v[p]
+    displacement[p] = displacement[p] + dt * u
+    wp.atomic_add(kinetic, 0, wp.float64(0.5 * mass[p] * wp.dot(u, u)))
+
+
 class Relaxation:
     """Dynamic relaxation by kinetic damping: run undamped, and whenever the kinetic energy has passed a
     peak, stop every particle. At a peak each mode passes its equilibrium, so stopping there leaves it
@@ -106,28 +263,34 @@ class Relaxation:
     stress's.
 
     `step(solver, dt)` after each substep of dt seconds returns True once a peak's energy is below RELAXED
-    of the first. `displacement` (P,3) m sums v dt: where the particles would have gone, had they not been
-    pinned (MPMSolver.pin), to first order the body's static deflection.
+    of the first. `displacement()` (P,3) m sums v dt: where the particles would have gone, had they not
+    been pinned (MPMSolver.pin), to first order the body's static deflection. The sums run where the
+    solver's arrays live; one number a substep comes back.
 
     Args:
-        masses: (P,) kg; positions: (P,3) rest positions, simulation frame (+y up), m; bodies: the particle
-            indices of each body that settles.
+        solver: the MPMSolver, whose masses and device are used; positions: (P,3) rest positions,
+            simulation frame (+y up), m; bodies: the particle indices of each body that settles.
     """
 
-    def __init__(self, masses: np.ndarray, positions: np.ndarray, bodies: list[np.ndarray]):
-        self.masses = np.asarray(masses, np.float64)
+    def __init__(self, solver, positions: np.ndarray, bodies: list[np.ndarray]):
+        self.masses = solver.mass.numpy().astype(np.float64)
         self.bodies = bodies
         self.offsets, self.inverse_inertia = [], []
         for members in self.bodies:
             centre, inertia = inertia_about_centre(positions[members], self.masses[members])
             self.offsets.append(positions[members] - centre)
             self.inverse_inertia.append(np.linalg.pinv(inertia))
-        self.displacement = np.zeros((len(self.masses), 3))
+        self._displacement = wp.zeros(len(self.masses), dtype=wp.vec3, device=solver.device)
+        self._kinetic = wp.zeros(1, dtype=wp.float64, device=solver.device)
         self.steps = 0
         self.first = self.previous = 0.0
         self.rising = True
         self.peaks = 0
         self.residual = 1.0
+
+    def displacement(self) -> np.ndarray:
+        """(P,3) m: the summed v dt of every particle."""
+        return self._displacement.numpy().astype(np.float64)
 
     def _without_drift_and_spin(self, v: np.ndarray) -> np.ndarray:
         """v (P,3) less each body's horizontal mean velocity and its rigid rotation about its centre of mass."""
@@ -140,13 +303,14 @@ class Relaxation:
         return v
 
     def step(self, solver, dt: float) -> bool:
-        v = solver.v.numpy().astype(np.float64)
         self.steps += 1
         if self.steps % RIGID_MOTION_EVERY == 0:
-            v = self._without_drift_and_spin(v)
+            v = self._without_drift_and_spin(solver.v.numpy().astype(np.float64))
             solver.v.assign(v.astype(np.float32))
-        self.displacement += dt * v
-        energy = 0.5 * float(self.masses @ np.sum(v * v, axis=1))
+        self._kinetic.zero_()
+        wp.launch(relaxation_sums, dim=len(self.masses), device=solver.device,
+                  inputs=[solver.v, solver.mass, dt, self._displacement, self._kinetic])
+        energy = float(self._kinetic.numpy()[0])
         if energy < self.previous and self.rising:  # just past a peak
             self.peaks += 1
             self.first = self.first or self.previous

@@ -1,10 +1,10 @@
 """From Gaussians and a scene's physics to per-frame particle trajectories.
 
 `Simulation` builds the particles (the G Gaussians first, then each object's
-interior fill), the simulation frame, the ground under the objects' centres of
-mass and the grid, the materials, conditions and rigid bodies; `run` first
-settles the deformable bodies into the stress that holds their photographed
-shape up (rest_state.py), then steps the MPM solver frame by frame with CFL
+interior fill), the simulation frame, the ground through the objects' lowest
+point and the one grid, the materials, conditions and rigid bodies; `run` first
+settles the deformable bodies whose weight the grid resolves into the stress
+that holds their photographed shape up (rest_state.py), then steps the MPM solver frame by frame with CFL
 substeps and records positions, every particle's deformation gradient and
 diagnostics, all in the world (camera) frame.
 """
@@ -94,13 +94,11 @@ class Simulation:
         self.speed_hint = float(np.max(np.linalg.norm(velocities, axis=1), initial=0.0))
         ground = physics.ground
 
-        # the cell size comes from the Gaussians (the ground, if any, through the lowest of them, as
-        # the final grid has it); the final grid also covers the fill
+        # the cell size comes from the Gaussians, the one grid is laid over the whole solid they fill
         means_sim = means @ self.Q.T
-        dx = domain.fit_grid(means_sim, physics.grid, ground_y=means_sim[:, 1].min() if ground.enabled else None,
-                             walls=physics.walls).dx
+        dx = domain.cell_size(means_sim, physics.grid, ground=ground.enabled, walls=physics.walls)
         self.spacing = spacing = lattice_spacing(dx, physics.particles_per_cell)
-        fills, gauss_volume = self._fill_objects(means, object_id, dx, silhouette, prior_volumes)
+        fills, gauss_volume = self._fill_objects(means, means_sim, object_id, dx, silhouette, prior_volumes)
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
         self.object_id = np.concatenate([object_id] + [np.full(len(f), k) for f, _, k in fills])
@@ -109,11 +107,11 @@ class Simulation:
         self.masses = density[self.object_id] * self.volumes
         self.material_id = np.array([PRESETS.index(m.preset) for m in self.materials])[self.object_id]
 
-        rest_sim = self.rest_world @ self.Q.T
+        self.rest_sim = rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         # the ground: the plane, normal to gravity, through the objects' lowest point; they stand on their base
         self.ground_y = float(rest_sim[:, 1].min()) if ground.enabled else None
-        self.grid = domain.fit_grid(rest_sim, physics.grid, ground_y=self.ground_y, walls=physics.walls)
+        self.grid = domain.fit_grid(rest_sim, dx, ground_y=self.ground_y, walls=physics.walls)
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
                        if ground.enabled else Ground(GROUND_NONE))
         # potential energy is measured from the ground, else from the grid's starting floor
@@ -130,6 +128,7 @@ class Simulation:
         self._free_logged = self._outside_logged = 0
         self._camera = None if silhouette is None else (silhouette[1], silhouette[0].shape)  # K, (H, W)
         self._rest_F_inverse = np.eye(3)  # settle() sets every particle's F of the loaded rest state
+        self.settled: rest_state.Settled | None = None  # what run()'s settle found
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
         log.info("%d particles (%d Gaussians + %d fill), grid %s of %.1f mm cells, %d frames",
@@ -138,8 +137,8 @@ class Simulation:
         self._log_bodies(rest_sim)
         self._check_budget()
 
-    def _fill_objects(self, means: np.ndarray, object_id: np.ndarray, dx: float, silhouette: tuple | None,
-                      prior_volumes: np.ndarray | None) -> tuple[list, np.ndarray]:
+    def _fill_objects(self, means: np.ndarray, means_sim: np.ndarray, object_id: np.ndarray, dx: float,
+                      silhouette: tuple | None, prior_volumes: np.ndarray | None) -> tuple[list, np.ndarray]:
         """Each object's interior: [(fill (N,3) world m, fill volumes (N,) m^3, object)], and the Gaussians'
         volumes (G,) m^3; grown to the photograph's silhouette when it is given, and carrying the volume of
         the depth prior's body where it is known.
@@ -151,9 +150,9 @@ class Simulation:
         15 %), while the prior's own body holds its volume to 3 %. What the solid lacks lies on its sides,
         where the prior's body is wider, and the side walls' particles carry it (fill.carry_volume): the
         mass is the prior's and sits as far out as the body's, so its moment of inertia follows (the 12 cm
-        ball at 192 px: 0.89 of a solid ball's before, 0.94 after). Mass and stress scale together on each
-        particle, so the material behaves as it did; an excess is taken from every particle alike."""
-        means_sim = means @ self.Q.T
+        ball at 192 px: 0.89 of a solid ball's without it, 0.94 with it). Mass and stress scale together on
+        each particle, so the material behaves as it did; an excess is taken from every particle alike.
+        means_sim: (G,3) the means in the simulation frame, m."""
         per_cell = self.physics.particles_per_cell
         fills, gauss_volume = [], np.zeros(len(means))
         for k in range(len(self.materials)):
@@ -226,50 +225,20 @@ class Simulation:
                 "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
 
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
-        """Each object's mass, volume and principal moments of inertia about its centre of mass."""
+        """Each object's mass, volume and principal moments of inertia about its centre of mass; and the
+        warnings of a body its weight crushes or no support holds (rest_state.warn_*)."""
         if self.ground_y is not None:
             log.info("the ground lies through the objects' lowest point")
+        g = float(np.linalg.norm(self.gravity_world))
         for k, material in enumerate(self.materials):
             sel = self.object_id == k
             m, x = self.masses[sel], rest_sim[sel]
             centre, moments = mass_properties(m, x)
             log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
                      material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
-            self._warn_crushed_by_weight(k, float(np.ptp(x[:, 1])))
+            rest_state.warn_crushed_by_weight(k, material, float(np.ptp(x[:, 1])), g)
             if self.ground_y is not None:
-                self._warn_unsupported(k, x, centre)
-
-    def _warn_unsupported(self, k: int, x: np.ndarray, centre: np.ndarray) -> None:
-        """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame)
-        up: its centre of mass lies outside the hull of its points within a lattice spacing of the ground
-        (its contact patch, as the ground's nodes meet it), so it tips over at t = 0."""
-        foot = x[:, 1] <= self.ground_y + self.spacing
-        if not np.any(x[:, 1] <= self.ground_y + 0.5 * self.spacing):
-            return  # in flight
-        margin = rest_state.support_margin(x[foot][:, [0, 2]], centre[[0, 2]])
-        if margin >= self.spacing:
-            return
-        where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge"
-                 % (1e3 * margin)) if math.isfinite(margin) else "over a line of contact, not an area"
-        log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its "
-                    "points within %.1f mm of the ground) holds its centre of mass %s, so it tips over from t = 0 "
-                    "as that shape would, rigid too. If the photographed object stands, its reconstruction is too "
-                    "thin or leans where the photograph does not show it (a bike seen from the side): hold its "
-                    "foot with a `fixed` condition (physics.conditions) or add reconstruct.extra_views", k,
-                    1e3 * self.spacing, where)
-
-    def _warn_crushed_by_weight(self, k: int, height: float) -> None:
-        """Say so when object k's own weight presses its base beyond its yield stress (rho g H, a column's)."""
-        material = self.materials[k]
-        yield_stress = getattr(material, "yield_stress", None)
-        g = float(np.linalg.norm(self.gravity_world))
-        pressure = material.density * g * height
-        if yield_stress and pressure > yield_stress:
-            log.warning("object %d (%s) is %.0f mm tall: its weight presses its base with about rho g H = %.3g Pa, "
-                        "above its yield_stress %.3g Pa, so it will slump under its own weight as a column of "
-                        "this material would. To keep its shape raise objects[%d].material.yield_stress above "
-                        "%.3g Pa, or make size_m smaller", k, material.preset, 1e3 * height, pressure,
-                        yield_stress, k, pressure)
+                rest_state.warn_unsupported(k, x, centre, self.ground_y, self.spacing)
 
     def substep_size(self, max_speed: float) -> float:
         """physics.dt, or the CFL substep for particles up to max_speed (m/s)."""
@@ -282,26 +251,59 @@ class Simulation:
         return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall,
                                   1.0 / self.physics.fps)
 
-    def settle(self) -> None:
-        """Find the stress under which the deformable bodies stand as photographed (rest_state.py).
+    def _lifted(self) -> np.ndarray:
+        """Boolean (objects,) of the objects that an impulse or velocity at t = 0 lifts off the ground: their
+        mean upward start speed (simulation frame) is more than a frame of free fall gives back."""
+        up = np.zeros(len(self.materials))
+        for item in self.conditions.items:
+            c = item.condition
+            if c.type in ("impulse", "velocity") and c.start_s <= 0.0:
+                speed = float((item.to_sim @ np.asarray(c.velocity, np.float64))[1])
+                np.add.at(up, self.object_id[item.members], self.masses[item.members] * speed)
+        mass = np.bincount(self.object_id, self.masses, minlength=len(self.materials))
+        return up / mass > float(np.linalg.norm(self.gravity_world)) / self.physics.fps
 
-        The bodies that touch the ground or are held by a `fixed` condition at t = 0 take up their
-        own weight by dynamic relaxation with kinetic damping (rest_state.Relaxation), every
-        particle pinned at its rest position while its velocity and F evolve; all others are held
-        still meanwhile (they are in flight and carry no load). Then every particle is at rest,
-        keeping the elastic F and history of the settled bodies.
-        """
-        s = self.solver
-        rest_sim = self.rest_world @ self.Q.T
+    def _settle_plan(self) -> tuple[list[int], dict[int, str], np.ndarray]:
+        """(the deformable objects on the ground or held at t = 0 that settle, {object: why not} for the others
+        of them (rest_state.why_not_settled), (P,) bool of the particles a fixed condition holds)."""
         held = self.conditions.fixed_at_start()
         loaded = {int(k) for k in np.unique(self.object_id[held])}
         if self.ground_y is not None:
-            loaded |= {int(k) for k in np.unique(self.object_id[rest_sim[:, 1] <= self.ground_y + self.grid.dx])}
-        deformable = sorted(k for k in loaded if self.materials[k].preset != "rigid")
+            loaded |= {int(k) for k in np.unique(self.object_id[self.rest_sim[:, 1] <= self.ground_y + self.grid.dx])}
+        held_objects = {int(k) for k in np.unique(self.object_id[held])}
+        lifted = self._lifted()
+        g = float(np.linalg.norm(self.gravity_world))
+        settling, skipped = [], {}
+        for k in sorted(loaded):
+            if self.materials[k].preset == "rigid":
+                continue
+            height = float(np.ptp(self.rest_sim[self.object_id == k, 1]))
+            why = rest_state.why_not_settled(self.materials[k], height, self.grid.dx, g,
+                                             bool(lifted[k]) and k not in held_objects)
+            if why is None:
+                settling.append(k)
+            else:
+                skipped[k] = why
+        return settling, skipped, held
+
+    def settle(self) -> rest_state.Settled:
+        """Find the stress under which the deformable bodies stand as photographed (rest_state.py); returns
+        what it found.
+
+        The bodies that touch the ground or are held by a `fixed` condition at t = 0 and need it
+        (rest_state.why_not_settled) take up their own weight by dynamic relaxation with kinetic damping
+        (rest_state.Relaxation), every particle pinned at its rest position while its velocity and F
+        evolve; all others are held still meanwhile. Then every particle is at rest, keeping the
+        elastic F and history of the settled bodies.
+        """
+        s, rest_sim = self.solver, self.rest_sim
+        deformable, skipped, held = self._settle_plan()
+        for k, why in skipped.items():
+            log.info("object %d starts unstressed, not settled: %s", k, why)
+        result = rest_state.Settled(skipped=skipped)
         if not deformable:
-            return
+            return result
         extents = [np.ptp(rest_sim[self.object_id == k], axis=0) for k in deformable]
-        heights = [float(e[1]) for e in extents]
         period = max(rest_state.fundamental_period(self.materials[k], float(e[1]), float(min(e[0], e[2])))
                      for k, e in zip(deformable, extents))
         still = held | ~np.isin(self.object_id, deformable)
@@ -311,18 +313,25 @@ class Simulation:
         s.hold_yield(True)  # the photographed solid stands on its elastic stress; where that is past yield, the run yields
         s.pin(True)
         bodies = [np.flatnonzero(self.object_id == k) for k in deformable]
-        relaxation = rest_state.Relaxation(self.masses, rest_sim, bodies)
-        started, steps = time.perf_counter(), 0
-        most = math.ceil(rest_state.SETTLE_PERIODS * period / dt)
-        log.info("settling objects %s into their weight: at most %d substeps (%.2f s of relaxation)", deformable,
-                 most, most * dt)
-        reported, footless = started, False
+        relaxation = rest_state.Relaxation(s, rest_sim, bodies)
+        # a held body cannot fall: only the free ones can be footless
+        can_fall = [k for k in deformable if not np.any(held[self.object_id == k])]
+        per_period = period / dt
+        most = math.ceil(min(rest_state.SETTLE_PERIODS * per_period,
+                             max(rest_state.SETTLE_SHARE * self._substeps_at_rest,
+                                 rest_state.MIN_PERIODS * per_period)))
+        g = float(np.linalg.norm(self.gravity_world))
+        log.info("settling objects %s into their weight: at most %d substeps (%.2f s of relaxation, %.0f %% of the "
+                 "run's %d)", deformable, most, most * dt, 100 * most / max(self._substeps_at_rest, 1),
+                 self._substeps_at_rest)
+        started = reported = time.perf_counter()
+        steps, footless = 0, False
         while steps < most:
             s.substep(dt)
             steps += 1
             if relaxation.step(s, dt):
                 break
-            if relaxation.peaks == 0 and steps * dt > rest_state.FOOTLESS_PERIODS * period:
+            if can_fall and relaxation.peaks == 0 and steps * dt > rest_state.FOOTLESS_PERIODS * period:
                 footless = True  # still falling, pinned: its contact cannot carry it as photographed
                 break
             if time.perf_counter() - reported > SETTLE_LOG_EVERY_S:
@@ -333,66 +342,33 @@ class Simulation:
                          (reported - started) / steps * (most - steps))
         s.pin(False)
         s.hold_yield(False)
+        result.substeps, result.relaxation_s, result.wall_s = steps, steps * dt, time.perf_counter() - started
+        result.peaks, result.residual = relaxation.peaks, relaxation.residual
         if footless:
             s.reset(rest_sim, keep=np.zeros(len(rest_sim), bool))
-            for k in deformable:
-                log.warning("object %d (%s, E = %.3g Pa) touches the ground on too small a contact to carry its "
-                            "weight in its photographed shape (no equilibrium in %.0f of its slowest periods, "
-                            "%.0f s): it starts unstressed and sags into its weight from t = 0, as a soft body "
-                            "set down on a point would. A stiffer material (objects[%d].material.youngs_modulus) "
-                            "sags less", k, self.materials[k].preset, self.materials[k].youngs_modulus,
-                            rest_state.FOOTLESS_PERIODS, time.perf_counter() - started, k)
-            return
-        settled = rest_sim + relaxation.displacement  # the deflection the pinned particles were kept from
-        sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
+            result.footless = can_fall
+            for k in can_fall:
+                rest_state.warn_footless(k, self.materials[k], rest_state.FOOTLESS_PERIODS, result.wall_s)
+            return result
+        settled = rest_sim + relaxation.displacement()  # the deflection the pinned particles were kept from
+        result.bodies = deformable
+        result.sag = float(np.max(rest_sim[:, 1] - settled[:, 1]))
         settled_F = s.F.numpy().astype(np.float64)
         for k in deformable:
-            self._warn_overstressed(k, rest_sim, settled_F)
-        if relaxation.residual >= rest_state.RELAXED:
-            for k, h in zip(deformable, heights):
-                self._warn_unsettled(k, h, rest_sim[self.object_id == k], settled[self.object_id == k], steps * dt)
+            sel = self.object_id == k
+            rest_state.warn_overstressed(k, self.materials[k], rest_sim[sel], settled_F[sel], self.masses[sel])
+            if (relaxation.residual >= rest_state.RELAXED and not np.any(held[sel])
+                    and rest_state.warn_giving_way(k, self.materials[k], rest_sim[sel], settled[sel], self.masses[sel],
+                                                   result.relaxation_s, g, self.grid.dx)):
+                result.giving_way.append(k)
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))
         self._rest_F_inverse = np.linalg.inv(s.F.numpy().astype(np.float64))
-        elapsed = time.perf_counter() - started
         log.info("settled objects %s into their weight in the photographed shape: %d substeps (%.3f s, %d kinetic "
                  "peaks, the last %.1e of the first), a sag of up to %.2f mm held up (%.0f s)", deformable,
-                 steps, steps * dt, relaxation.peaks, relaxation.residual, 1e3 * sag, elapsed)
+                 steps, result.relaxation_s, relaxation.peaks, relaxation.residual, 1e3 * result.sag, result.wall_s)
         log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
-                 self._substeps_at_rest * elapsed / steps, self._substeps_at_rest, 1e3 * elapsed / steps)
-
-    def _warn_overstressed(self, k: int, rest_sim: np.ndarray, settled_F: np.ndarray) -> None:
-        """Say so when more than OVERSTRESSED_SHARE of object k's mass stands past its yield stress."""
-        material = self.materials[k]
-        if not getattr(material, "yield_stress", None):  # metal, plasticine and foam yield by von Mises
-            return
-        sel = self.object_id == k
-        stress = rest_state.von_mises_stress(settled_F[sel], material)
-        over = stress > material.yield_stress
-        share = float(self.masses[sel][over].sum() / self.masses[sel].sum())
-        if share <= rest_state.OVERSTRESSED_SHARE:
-            return
-        heights = 1e3 * (rest_sim[sel, 1] - rest_sim[sel, 1].min())
-        log.warning("object %d (%s): standing under its own weight as photographed, %.1f %% of its mass is stressed "
-                    "past its yield_stress %.3g Pa (up to %.3g Pa, %.0f to %.0f mm above its lowest point), so it "
-                    "yields there in the run and may sag, lean or fall as a body of this material would. To keep "
-                    "its shape raise objects[%d].material.yield_stress above %.3g Pa, or make size_m smaller", k,
-                    material.preset, 100 * share, material.yield_stress, stress.max(), heights[over].min(),
-                    heights[over].max(), k, np.percentile(stress, 100 * (1 - rest_state.OVERSTRESSED_SHARE)))
-
-    def _warn_unsettled(self, k: int, height: float, rest: np.ndarray, settled: np.ndarray, seconds: float) -> None:
-        """Say that object k did not come to rest under its weight, how far it moved, and what holds it."""
-        material = self.materials[k]
-        turn = rest_state.turn_deg(rest, settled, self.masses[self.object_id == k])
-        sag = float(np.max(rest[:, 1] - settled[:, 1]))
-        column = rest_state.column_sag(material, height, float(np.linalg.norm(self.gravity_world)))
-        log.warning("object %d (%s, E = %.3g Pa) did not come to rest under its own weight in %.2f s: held in its "
-                    "photographed shape it was still giving way, %.1f mm of sag and %.1f degrees of turn so far, "
-                    "where an elastic column of its %.0f mm height sags %.2f mm. "
-                    "As photographed it may not stand: in the run it will go on sagging, buckle or tip over. A "
-                    "stiffer material (objects[%d].material.youngs_modulus%s), a smaller size_m or preset rigid "
-                    "holds it up", k, material.preset, material.youngs_modulus, seconds, 1e3 * sag, turn,
-                    1e3 * height, 1e3 * column, k,
-                    " or yield_stress" if getattr(material, "yield_stress", None) else "")
+                 self._substeps_at_rest * result.wall_s / steps, self._substeps_at_rest, 1e3 * result.wall_s / steps)
+        return result
 
     def run(self) -> TrajectoriesArtifact:
         """Simulate the whole duration; returns the trajectories artifact (world frame)."""
@@ -402,7 +378,7 @@ class Simulation:
         diag = {k: np.zeros((T,) + s) for k, s in [("kinetic_energy", ()), ("potential_energy", ()), ("momentum", (3,)),
                                                    ("angular_momentum", (3,)), ("max_speed", ()), ("substeps", ())]}
         times = np.arange(T) / self.physics.fps
-        self.settle()
+        self.settled = self.settle()
         self._record(0, positions, F, diag)
         t, started = 0.0, time.perf_counter()
         for f in range(1, T):
