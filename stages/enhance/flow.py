@@ -26,7 +26,7 @@ from scipy import signal
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
-from .relight import Relighting
+from .unseen import Continuation
 
 log = logging.getLogger("physmotion.enhance.flow")
 
@@ -92,6 +92,12 @@ def trust(confidence: np.ndarray, threshold: float) -> np.ndarray:
     return x * x * (3 - 2 * x)
 
 
+def seen_fraction(confidence: np.ndarray, coherence: np.ndarray) -> np.ndarray:
+    """(h, w) in [0, 1]: how much of each pixel's surface the photograph saw (source_confidence is
+    that times source_coherence; where the coherence is 0 it does not say, and the pixel counts as seen)."""
+    return np.where(coherence > 1e-3, np.clip(confidence / np.maximum(coherence, 1e-3), 0, 1), 1.0)
+
+
 def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float,
                    hidden_surfaces: str = "photo", relight: bool = True) -> np.ndarray:
     """The flow-enhanced video.
@@ -113,22 +119,24 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     fine_photo = band_limited_upsample(photo)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
-    relighting = Relighting.fit(coarse, photo) if relight else None
+    continuation = Continuation.fit(coarse, gaussians, photo, coverage, lambda uv: photograph_at(fine_photo, uv),
+                                    relight)
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
         rendered_uv = coarse.source_uv[t] * scale
         uv = smooth_source(rendered_uv)
-        from_photo = photograph_at(fine_photo, uv)
+        seen = seen_fraction(coarse.source_confidence[t], coarse.source_coherence[t])
+        rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
+        from_photo, rendered, inside = continuation(t, uv, seen, rendered)
         trusted = trust(coarse.source_confidence[t], threshold)
         if hidden_surfaces == "photo":
             trusted = np.maximum(trusted, trust(coarse.source_coherence[t], threshold))
-        weight = (trusted * sample_at(coverage, uv))[..., None]
-        rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
+        weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
-        if relighting is not None:
-            colour = relighting(t, colour, uv)
         background = backdrop(coarse.alpha[t], rendered_uv)
         frames[t] = blend_over_background(colour, coarse.alpha[t], background)
-        log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph", t + 1, T,
-                 100.0 * float(weight[..., 0][coarse.alpha[t] > 0.5].mean()) if (coarse.alpha[t] > 0.5).any() else 0.0)
+        on = coarse.alpha[t] > 0.5
+        log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph, %.0f%% of them continuing "
+                 "surfaces it did not see", t + 1, T, 100.0 * float(weight[..., 0][on].mean()) if on.any() else 0.0,
+                 100.0 * float((1 - seen)[on].mean()) if on.any() else 0.0)
     return frames

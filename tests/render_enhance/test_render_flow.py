@@ -180,10 +180,13 @@ def test_source_spread_is_the_weighted_spread_of_the_gaussians_sources():
             assert abs(float(spread[i, j]) - expected) < 1e-6 * max(1.0, expected)
 
 
-def test_revealed_hidden_layer_reads_the_photograph_through_the_object():
+def test_revealed_hidden_layer_reads_the_photograph_at_its_mirror_image():
     """The front layer leaves the view at frame 1 and reveals the green layer the photograph never
-    saw. Nothing else moved, so each pixel's source is its own place in the photograph: the
-    "photo" setting must show the photograph there, "render" the green layer."""
+    saw. Nothing else moved, so each pixel's source is its own place in the photograph. The body is
+    taken as mirror-symmetric across the vertical plane halfway between the layers, facing the
+    camera from the disc's centre: the point M of the front (z = DEPTH) whose mirror image lies on
+    a pixel's ray is the colour of the unseen surface there (float64 here). The "photo" setting
+    must show the photograph at M's projection, "render" the green layer."""
     gaussians = disc_gaussians()
     front = len(gaussians.means) // 2
     revealed = translated(gaussians, [0, 0])
@@ -198,7 +201,17 @@ def test_revealed_hidden_layer_reads_the_photograph_through_the_object():
     assert np.abs(coarse.source_uv[1][inner] - np.stack([cols + 0.5, rows + 0.5], 1)).max() < 0.1  # px
     through = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo")[1][inner].astype(float)
     rendered = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="render")[1][inner].astype(float)
-    assert np.abs(through - photo[inner]).mean() < 2.0
+    rays = np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))], 1) @ np.linalg.inv(gaussians.K).T
+    towards = gaussians.means.mean(0) * [1, 0, 1]
+    towards /= np.linalg.norm(towards)
+    plane = (gaussians.means @ towards).min() / 2 + (gaussians.means @ towards).max() / 2
+    # mirror(r t) = r t - 2 (t r.n - plane) n has z = DEPTH
+    t = (DEPTH - 2 * plane * towards[2]) / (rays[:, 2] - 2 * (rays @ towards) * towards[2])
+    front = rays * t[:, None] - 2 * (t * (rays @ towards) - plane)[:, None] * towards
+    image = front @ gaussians.K.T
+    mirrored = photograph_at(band_limited_upsample(photo.astype(np.float32)), (image[:, :2] / image[:, 2:])[None])[0]
+    assert np.abs(through - mirrored).mean() < 3.0
+    assert np.abs(through - photo[inner]).mean() > 3 * np.abs(through - mirrored).mean()  # not the same pixel
     assert np.abs(rendered - [0, 255, 0]).mean() < 3.0
 
 

@@ -1,0 +1,298 @@
+"""Surfaces the photograph did not see, coloured as the surfaces they continue.
+
+The reconstruction's body is mirror-symmetric about a vertical plane through each
+object, across the view (docs/decisions/0001-back-closure.md): its back is its
+front, mirrored. A pixel whose surface the photograph never saw therefore takes
+the colour of the mirror image of that surface point, which the photograph did
+see. pm-render gives such a pixel, as its source, the point of the photograph in
+front of it (its surface point at rest, projected): the surface point lies on that
+pixel's ray at rest, where the ray leaves the body, and its mirror image is where
+the mirrored ray meets the front (:func:`mirrored_source`).
+
+Colours are read as albedo: the photograph's pixel divided by the shading the
+fitted light gave it (relight.py), times the shading of where the surface faces
+now. The photograph's pixels are a poor record where it saw the surface edge-on
+(a pixel spans a strip of surface, and along the silhouette mixes in the
+background) or in deep shade (its colour is mostly noise over a small shading):
+there the albedo is continued inwards from the nearest pixels it recorded well
+(:meth:`Albedo.fit`), so that a surface which turns from the limb towards the
+camera shows a smooth continuation rather than the limb's rings and dark rim. A
+pixel the photograph recorded well, or one still seen about as it was, keeps the
+photograph's own pixel, re-shaded.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import cv2
+import numpy as np
+
+from schemas.artifacts import CoarseArtifact, GaussiansArtifact
+
+from .compositing import normalised_blur, resize_to, sample_at
+from .relight import Relighting, Shading, smooth_normals, to_linear, to_srgb
+
+log = logging.getLogger("physmotion.enhance.unseen")
+
+RECORDED_FACING = (0.3, 0.55)
+"""Cosine between the surface's normal and the view ray (at rest) from which the photograph's pixel
+starts to be, and is fully, a record of the surface's colour. Below, a pixel spans a strip of surface
+(at 0.3, more than three times its width along it) and its colour is the limb's dark, blurred rim."""
+RECORDED_SHADING = (0.2, 0.35)
+"""Share of the brightest shading (ambient + |light|) from which the photograph's pixel starts to be,
+and is fully, a record of the surface's colour: in deep shade dividing by the shading amplifies noise."""
+UNCHANGED = 0.2
+"""Change of the facing cosine (and of the shading, as a share of the brightest) over which a pixel the
+photograph recorded poorly goes from its own pixel (seen as it was: at rest the video is the
+photograph) to the continued albedo."""
+CONTINUE_SIGMA_PX = 1.5
+"""Blur (output pixels) of each step of the inward continuation: one step reaches about this far."""
+CONTINUE_MARGIN_PX = 3
+"""The continued albedo covers the objects' masks dilated by this much, so that sources which fall a
+little off the silhouette still read the object."""
+MIRROR_ITERATIONS = 4
+"""Fixed-point steps of :func:`mirrored_source`: each divides the error by the slope of the front
+over the mirror line; four leave under a hundredth of a pixel on the test sphere away from its limb."""
+MAX_GAIN = 2.5
+"""Shading ratios applied to the photograph's own pixels are clipped to [1/MAX_GAIN, MAX_GAIN]."""
+
+
+def ramp(x: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
+    """0 up to bounds[0], 1 from bounds[1], smooth between."""
+    s = np.clip((np.nan_to_num(x) - bounds[0]) / (bounds[1] - bounds[0]), 0.0, 1.0)
+    return s * s * (3 - 2 * s)
+
+
+def view_rays(K: np.ndarray, h: int, w: int) -> np.ndarray:
+    """(h, w, 3) unit directions, camera frame, of the rays through the pixel centres of intrinsics K."""
+    rows, cols = np.indices((h, w), dtype=np.float64)
+    rays = np.stack([cols + 0.5, rows + 0.5, np.ones_like(cols)], -1) @ np.linalg.inv(K).T
+    return (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).astype(np.float32)
+
+
+def facing(normals: np.ndarray, rays: np.ndarray) -> np.ndarray:
+    """(h, w) cosine between camera-facing normals and the view rays; NaN where there is no normal."""
+    return -np.sum(normals * rays, axis=-1)
+
+
+@dataclass(frozen=True)
+class MirrorPlanes:
+    """Each object's plane of symmetry, camera frame: points x with x . normal[k] = offset[k].
+
+    normal (O, 3): horizontal, towards the object (its body is mirror-symmetric across the view);
+    offset (O,) m: halfway between the object's nearest and farthest Gaussians along it.
+    """
+
+    normal: np.ndarray
+    offset: np.ndarray
+
+    @classmethod
+    def of(cls, gaussians: GaussiansArtifact) -> "MirrorPlanes":
+        R, t = gaussians.world_to_camera[:3, :3], gaussians.world_to_camera[:3, 3]
+        down = R @ np.array([0.0, 1.0, 0.0])  # the world's y runs along gravity
+        means = gaussians.means.astype(np.float64) @ R.T + t
+        objects = int(gaussians.object_id.max()) + 1
+        normal, offset = np.zeros((objects, 3)), np.zeros(objects)
+        for k in range(objects):
+            own = means[gaussians.object_id == k]
+            if len(own) == 0:
+                normal[k] = (0.0, 0.0, 1.0)
+                continue
+            centre = own.mean(0)
+            towards = centre - (centre @ down) * down
+            if np.linalg.norm(towards) < 0.25 * np.linalg.norm(centre):  # seen from high above: across the view
+                towards = centre
+            normal[k] = towards / np.linalg.norm(towards)
+            along = own @ normal[k]
+            offset[k] = 0.5 * (np.percentile(along, 1) + np.percentile(along, 99))
+        return cls(normal, offset)
+
+
+def mirrored_source(uv: np.ndarray, front_distance: np.ndarray, rays: np.ndarray, normal: np.ndarray,
+                    offset: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """(h', w', 2) where the photograph saw the mirror image of the surface point behind each source.
+
+    A source uv names the ray at rest on which the pixel's surface point lies; for an unseen surface,
+    where that ray leaves the body. Its mirror image across the object's plane lies on the front. The
+    point is found by fixed-point steps: take the front at the current guess p, put the back point on
+    uv's ray at the mirrored distance from the plane, and project its mirror image as the next p.
+
+    Args:
+        uv: (h', w', 2) source points at output resolution, NaN where none.
+        front_distance: (h, w) distance (m) from the camera to the surface at rest at each output
+            pixel (frame 0's depth / alpha), NaN off the objects.
+        rays: (h, w, 3) unit view rays of the output pixels (:func:`view_rays`).
+        normal: (h', w', 3), offset: (h', w') each pixel's plane (its object's, :class:`MirrorPlanes`).
+        K: (3, 3) output intrinsics.
+    Returns:
+        Image points at output resolution; uv itself where the front is not known.
+    """
+    inverse_K = np.linalg.inv(K)
+    ray = np.concatenate([uv, np.ones_like(uv[..., :1])], -1) @ inverse_K.T
+    ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+    along = np.sum(ray * normal, -1)
+    known = np.isfinite(front_distance)
+    distance_map = np.nan_to_num(front_distance).astype(np.float32)
+    weight_map = known.astype(np.float32)
+    p = uv.copy()
+    for _ in range(MIRROR_ITERATIONS):
+        weight = sample_at(weight_map, p)
+        distance = sample_at(distance_map, p) / np.maximum(weight, 1e-6)
+        front_ray = sample_at(rays, p)
+        front = front_ray / (np.linalg.norm(front_ray, axis=-1, keepdims=True) + 1e-12) * distance[..., None]
+        height = np.sum(front * normal, -1) - offset  # the front's signed distance from the plane (< 0)
+        back = ray * ((offset - height) / np.where(np.abs(along) > 1e-6, along, 1e-6))[..., None]
+        image = (back + 2 * height[..., None] * normal) @ K.T
+        step = image[..., :2] / np.maximum(image[..., 2:], 1e-9)
+        p = np.where(((weight > 0.5) & np.isfinite(step).all(-1))[..., None], step, p)
+    return p.astype(np.float32)
+
+
+class Albedo:
+    """The photograph as albedo (linear light over the fitted shading) at output resolution, continued
+    inwards over the pixels it records poorly; and how well it records each of them.
+
+    Use :meth:`fit`.
+    """
+
+    def __init__(self, photo_linear, shading_rest, recorded, continued, inside, facing_rest):
+        self.photo_linear, self.shading_rest = photo_linear, shading_rest
+        self.recorded, self.continued, self.inside, self.facing_rest = recorded, continued, inside, facing_rest
+
+    @classmethod
+    def fit(cls, photo: np.ndarray, mask: np.ndarray, rest_normals: np.ndarray, rays: np.ndarray,
+            shading: Optional[Shading]) -> "Albedo":
+        """Args:
+            photo: (h, w, 3) sRGB in [0, 255] at output resolution.
+            mask: (h, w) float in [0, 1], how purely a photograph pixel shows an object
+                (flow.object_coverage, its silhouette already faded).
+            rest_normals: (h, w, 3) frame 0's smoothed normals (relight.smooth_normals), NaN off it.
+            rays: (h, w, 3) view rays.
+            shading: the fitted light, or None (the photograph's own brightness is the albedo).
+        """
+        photo_linear = to_linear(photo.astype(np.float32)).astype(np.float32)
+        facing_rest = facing(rest_normals, rays)
+        if shading is None:
+            shading_rest = np.ones(mask.shape, np.float32)
+            lit = np.ones(mask.shape, np.float32)
+        else:
+            shading_rest = np.nan_to_num(shading(np.nan_to_num(rest_normals)), nan=1.0).astype(np.float32)
+            brightest = shading.ambient + float(np.linalg.norm(shading.light))
+            lit = ramp(shading_rest / brightest, RECORDED_SHADING)
+        recorded = (mask * ramp(facing_rest, RECORDED_FACING) * lit).astype(np.float32)
+        albedo = photo_linear / shading_rest[..., None]
+        inside = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * CONTINUE_MARGIN_PX + 1,) * 2, np.uint8)) > 0
+        continued = continue_inwards(albedo, recorded > 0.5, inside)
+        log.info("unseen surfaces: %.0f%% of the objects' pixels record their colour well, the rest is continued",
+                 100 * float((recorded > 0.5)[mask > 0.5].mean()) if (mask > 0.5).any() else 0.0)
+        return cls(photo_linear, shading_rest, recorded, continued, inside.astype(np.float32), facing_rest)
+
+
+def continue_inwards(values: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
+    """(h, w, C) float32: ``values`` where known, elsewhere in ``region`` continued from the known
+    pixels ring by ring (each ring the normalised blur of those known so far, CONTINUE_SIGMA_PX), so
+    the continuation is as smooth as the known values and follows their nearest ones."""
+    filled = np.where(known[..., None], values, 0.0).astype(np.float32)
+    have = known & region
+    if not have.any():
+        return np.where(region[..., None], values, 0.0).astype(np.float32)
+    while True:
+        missing = region & ~have
+        if not missing.any():
+            break
+        blurred, weight = normalised_blur(filled, have, CONTINUE_SIGMA_PX)
+        reach = missing & (weight > 0.05)
+        if not reach.any():  # a part of the region no known pixel reaches: its mean colour
+            filled[missing] = filled[have].mean(0)
+            break
+        filled[reach] = blurred[reach]
+        have = have | reach
+    return filled
+
+
+class Continuation:
+    """Each frame's object colour from the photograph, unseen surfaces continuing seen ones.
+
+    Use :meth:`fit`; call with a frame's index, source points and seen fraction.
+    """
+
+    def __init__(self, coarse, albedo, relighting, sigma_px, planes, labels, front_distance, rays, photograph_at):
+        self.coarse, self.albedo, self.relighting, self.sigma_px = coarse, albedo, relighting, sigma_px
+        self.planes, self.labels, self.front_distance, self.rays = planes, labels, front_distance, rays
+        self.photograph_at = photograph_at
+
+    @classmethod
+    def fit(cls, coarse: CoarseArtifact, gaussians: GaussiansArtifact, photo: np.ndarray, coverage: np.ndarray,
+            photograph_at: Callable[[np.ndarray], np.ndarray], relight: bool) -> "Continuation":
+        """Args:
+            photo: (h, w, 3) the photograph at output resolution; coverage: (h, w) flow.object_coverage;
+            photograph_at: (h, w, 2) image points -> (h, w, 3) sRGB, the photograph read there with its
+                detail (flow.photograph_at); relight: fit a light.
+        """
+        h, w = coarse.alpha.shape[1:]
+        relighting = Relighting.fit(coarse, photo) if relight else None
+        on = coarse.alpha[0] > 0.5
+        sigma = relighting.sigma_px if relighting else max(1.0, 0.03 * float(np.sqrt(max(on.sum(), 1))))
+        rest_normals = relighting.rest_normals if relighting else smooth_normals(coarse.normal[0], coarse.alpha[0], sigma)
+        rays = view_rays(coarse.K, h, w)
+        albedo = Albedo.fit(photo, coverage, rest_normals, rays, relighting.shading if relighting else None)
+        front_distance = np.where(on, coarse.depth[0] / np.maximum(coarse.alpha[0], 1e-6), np.nan)
+        labels = cv2.resize(gaussians.mask, (w, h), interpolation=cv2.INTER_NEAREST)
+        return cls(coarse, albedo, relighting, sigma, MirrorPlanes.of(gaussians), labels, front_distance, rays,
+                   photograph_at)
+
+    def shading_now(self, t: int) -> tuple[np.ndarray, np.ndarray]:
+        """(h, w) the shading and (h, w) the facing cosine of frame t's surface."""
+        normals = smooth_normals(self.coarse.normal[t], self.coarse.alpha[t], self.sigma_px)
+        shading = (np.ones(normals.shape[:2], np.float32) if self.relighting is None
+                   else np.nan_to_num(self.relighting.shading(np.nan_to_num(normals)), nan=1.0))
+        return shading.astype(np.float32), facing(normals, self.rays)
+
+    def mirror(self, uv: np.ndarray) -> np.ndarray:
+        """(h, w, 2) mirrored sources (:func:`mirrored_source`) of sources uv, each by its object's plane."""
+        label = sample_at(self.labels.astype(np.float32), uv, cv2.INTER_NEAREST).astype(int)
+        k = np.clip(label - 1, 0, len(self.planes.offset) - 1)
+        return mirrored_source(uv, self.front_distance, self.rays, self.planes.normal[k], self.planes.offset[k],
+                               self.coarse.K)
+
+    def read(self, uv: np.ndarray, shading_now: np.ndarray, facing_now: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Colour (h, w, 3, linear), the shading its source had (h, w) and whether it is on an object
+        (h, w), for a surface now shaded ``shading_now`` and facing ``facing_now`` whose colour the
+        photograph holds at uv: its own pixel where recorded well or seen as it was, else continued."""
+        a = self.albedo
+        shading_then = sample_at(a.shading_rest, uv)
+        recorded = sample_at(a.recorded, uv)
+        facing_then = sample_at(np.nan_to_num(a.facing_rest), uv)
+        relit = 1.0 if self.relighting is None else self.relighting.shading.ambient + float(
+            np.linalg.norm(self.relighting.shading.light))
+        unchanged = (np.clip(1 - np.abs(np.nan_to_num(facing_now) - facing_then) / UNCHANGED, 0, 1)
+                     * np.clip(1 - np.abs(shading_now - shading_then) / (UNCHANGED * relit), 0, 1))
+        own = np.maximum(recorded, unchanged)[..., None]
+        from_fine = to_linear(self.photograph_at(uv))
+        gain = np.clip(shading_now / np.maximum(shading_then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)[..., None]
+        continued = sample_at(a.continued, uv) * shading_now[..., None]
+        return own * from_fine * gain + (1 - own) * continued, shading_then, sample_at(a.inside, uv)
+
+    def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Frame t's object colour from the photograph (h, w, 3) sRGB in [0, 255], the render re-shaded
+        alike (h, w, 3), and where the photograph holds the pixel's surface (h, w) in [0, 1].
+
+        Args:
+            uv: (h, w, 2) the frame's smoothed source points at output resolution (flow.smooth_source).
+            seen: (h, w) in [0, 1], how much of each pixel's surface the photograph saw.
+            rendered: (h, w, 3) the render's colour, sRGB in [0, 255].
+        """
+        shading_now, facing_now = self.shading_now(t)
+        direct, shading_direct, inside_direct = self.read(uv, shading_now, facing_now)
+        mirrored, shading_mirrored, inside_mirrored = self.read(self.mirror(uv), shading_now, facing_now)
+        s = np.clip(seen, 0, 1)
+        colour = s[..., None] * direct + (1 - s[..., None]) * mirrored
+        inside = s * inside_direct + (1 - s) * inside_mirrored
+        then = s * shading_direct + (1 - s) * shading_mirrored
+        # the render's colours carry the photograph's shading of their source, as the photograph does
+        gain = np.clip(shading_now / np.maximum(then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)
+        gain = np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None]
+        relit_render = to_srgb(to_linear(rendered) * gain)
+        return to_srgb(colour).astype(np.float32), relit_render.astype(np.float32), inside.astype(np.float32)
