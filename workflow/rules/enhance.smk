@@ -1,28 +1,3 @@
-import shlex
-
-
-def lora_dir(wildcards):
-    """The LoRA folder when the scene asks for personalisation, else nothing."""
-    s = scene(wildcards.scene)
-    wanted = uses_diffusion(wildcards.scene) and s.enhance.diffusion.lora.enabled
-    return [str(RESULTS / wildcards.scene / "lora")] if wanted else []
-
-
-def artifacts_and_lora(*names, latents=False):
-    """Input function: this scene's named artifacts (+ latents.h5 when diffusion), + the LoRA folder when enabled."""
-    def inputs(wildcards):
-        wanted = list(names) + (["latents"] if latents and uses_diffusion(wildcards.scene) else [])
-        files = {name: str(RESULTS / wildcards.scene / f"{name}.h5") for name in wanted}
-        files.update({"lora": folder for folder in lora_dir(wildcards)})
-        return files
-    return inputs
-
-
-def optional_flag(flag, files):
-    """' --flag path' for a present optional input, '' otherwise."""
-    return lambda wildcards, input: f" {flag} {shlex.quote(input[files])}" if files in input.keys() else ""
-
-
 rule lora:
     input:
         gaussians=RESULTS / "{scene}" / "gaussians.h5",
@@ -32,6 +7,7 @@ rule lora:
     params:
         stage_keys_hash=keys_hash("lora"),
         scene=scene_yaml,
+        device=DEVICE,
     log:
         RESULTS / "{scene}" / "logs" / "lora.log",
     benchmark:
@@ -44,7 +20,7 @@ rule lora:
         runtime=240,
         gpu=GPU,
     shell:
-        "pm-lora --scene {params.scene:q} --gaussians {input.gaussians:q} --out {output:q} --device " + DEVICE + " > {log:q} 2>&1"
+        "pm-lora --scene {params.scene:q} --gaussians {input.gaussians:q} --out {output:q} --device {params.device} > {log:q} 2>&1"
 
 
 rule invert:
@@ -55,6 +31,7 @@ rule invert:
     params:
         stage_keys_hash=keys_hash("invert"),
         scene=scene_yaml,
+        device=DEVICE,
         lora=optional_flag("--lora", "lora"),
     log:
         RESULTS / "{scene}" / "logs" / "invert.log",
@@ -69,7 +46,7 @@ rule invert:
         gpu=GPU,
     shell:
         "pm-invert --scene {params.scene:q} --coarse {input.coarse:q} --gaussians {input.gaussians:q}{params.lora}"
-        " --out {output:q} --device " + DEVICE + " > {log:q} 2>&1"
+        " --out {output:q} --device {params.device} > {log:q} 2>&1"
 
 
 rule enhance:
@@ -83,6 +60,7 @@ rule enhance:
     params:
         stage_keys_hash=keys_hash("enhance"),
         scene=scene_yaml,
+        device=DEVICE,
         latents=optional_flag("--latents", "latents"),
         lora=optional_flag("--lora", "lora"),
     log:
@@ -99,4 +77,4 @@ rule enhance:
         gpu=lambda w: GPU if uses_diffusion(w.scene) else 0,
     shell:
         "pm-enhance --scene {params.scene:q} --coarse {input.coarse:q} --gaussians {input.gaussians:q}"
-        "{params.latents}{params.lora} --out {output.video:q} --device " + DEVICE + " > {log:q} 2>&1"
+        "{params.latents}{params.lora} --out {output.video:q} --device {params.device} > {log:q} 2>&1"

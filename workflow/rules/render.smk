@@ -8,6 +8,7 @@ rule render:
     params:
         stage_keys_hash=keys_hash("render"),
         scene=scene_yaml,
+        device=DEVICE,
     log:
         RESULTS / "{scene}" / "logs" / "render.log",
     benchmark:
@@ -21,4 +22,4 @@ rule render:
         gpu=GPU,
     shell:
         "pm-render --scene {params.scene:q} --gaussians {input.gaussians:q} --trajectories {input.trajectories:q}"
-        " --out {output.coarse:q} --video {output.video:q} --device " + DEVICE + " > {log:q} 2>&1"
+        " --out {output.coarse:q} --video {output.video:q} --device {params.device} > {log:q} 2>&1"

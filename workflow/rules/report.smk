@@ -1,5 +1,6 @@
 # The plots of `snakemake --report report.html`: drawn from the artifacts and the benchmark files by pm-plots.
-# A local rule: it runs where snakemake runs (the project's environment, which has pm-plots), in no image.
+# A local rule: it runs where snakemake runs (the project's environment, which has pm-plots), in no image
+# (a `run:` directive, which no software deployment method moves into one).
 localrules:
     plots,
 
@@ -21,6 +22,8 @@ rule plots:
     params:
         benchmarks=lambda w: str(RESULTS / w.scene / "benchmarks"),
         out=lambda w: str(RESULTS / w.scene / "report"),
-    shell:
-        "pm-plots --gaussians {input.gaussians:q} --trajectories {input.trajectories:q}"
-        " --benchmarks {params.benchmarks:q} --out {params.out:q}"
+    log:
+        RESULTS / "{scene}" / "logs" / "plots.log",
+    run:
+        shell("pm-plots --gaussians {input.gaussians:q} --trajectories {input.trajectories:q}"
+              " --benchmarks {params.benchmarks:q} --out {params.out:q} > {log:q} 2>&1")

@@ -8,6 +8,7 @@ rule simulate:
     params:
         stage_keys_hash=keys_hash("simulate"),
         scene=scene_yaml,
+        device=DEVICE,
     log:
         RESULTS / "{scene}" / "logs" / "simulate.log",
     benchmark:
@@ -21,4 +22,4 @@ rule simulate:
         gpu=GPU,
     shell:
         "pm-simulate --scene {params.scene:q} --gaussians {input.gaussians:q} --out {output.trajectories:q}"
-        " --device " + DEVICE + " > {log:q} 2>&1"
+        " --device {params.device} > {log:q} 2>&1"
