@@ -18,6 +18,8 @@ import warp as wp
 
 from schemas.materials import PRESETS
 
+from .state import Particles
+
 # Integer tags of the presets inside kernels, in PRESETS order.
 JELLY, METAL, SAND, PLASTICINE, FOAM, SNOW, RIGID, FRACTURE = range(8)
 assert PRESETS == ("jelly", "metal", "sand", "plasticine", "foam", "snow", "rigid", "fracture")
@@ -201,20 +203,13 @@ def drucker_prager_return(eps: wp.vec3, mu: float, lam: float, alpha: float):
 
 
 @wp.kernel
-def update_stress(
-    start: int,
-    materials: wp.array(dtype=MaterialParams),
-    object_id: wp.array(dtype=wp.int32),
-    volume: wp.array(dtype=float),
-    dt: float,
-    F: wp.array(dtype=wp.mat33),
-    history: wp.array(dtype=float),
-    volume_stress: wp.array(dtype=wp.mat33),
-):
-    """Return-map F (trial -> elastic part) and write V_p * Kirchhoff stress (N m)."""
+def update_stress(start: int, dt: float, materials: wp.array(dtype=MaterialParams), particles: Particles):
+    """Return-map F (trial -> elastic part) and write V_p * Kirchhoff stress (N m); dt in s, materials
+    indexed by the particles' object_id."""
     p = wp.tid() + start
-    mat = materials[object_id[p]]
-    Fp = F[p]
+    mat = materials[particles.object_id[p]]
+    Fp = particles.F[p]
+    history = particles.history
     tau = wp.mat33(0.0)
 
     if mat.kind == JELLY:
@@ -267,8 +262,8 @@ def update_stress(
                 if damage >= 1.0:
                     Fp = U * wp.transpose(V)
 
-    F[p] = Fp
-    volume_stress[p] = volume[p] * tau
+    particles.F[p] = Fp
+    particles.volume_stress[p] = particles.volume[p] * tau
 
 
 @wp.func

@@ -27,31 +27,21 @@ from __future__ import annotations
 import warp as wp
 
 from .constitutive import FRACTURE, MaterialParams
+from .state import Cracks, GridNodes, Particles
 from .stencil import quadratic_weights, stencil_base
 
 
 @wp.kernel
-def damage_to_grid(
-    x: wp.array(dtype=wp.vec3),
-    mass: wp.array(dtype=float),
-    history: wp.array(dtype=float),
-    materials: wp.array(dtype=MaterialParams),
-    object_id: wp.array(dtype=wp.int32),
-    free: wp.array(dtype=wp.int32),
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    node_damage_mass: wp.array3d(dtype=wp.vec2),
-    node_max_damage: wp.array3d(dtype=float),
-):
+def damage_to_grid(materials: wp.array(dtype=MaterialParams), particles: Particles, grid: GridNodes, cracks: Cracks):
     """Scatter w_ip (m_p D_p, m_p) and the largest D_p to the nodes (D = 0 for materials that do not break)."""
     p = wp.tid()
-    if free[p] == 1:
+    if particles.free[p] == 1:
         return
     damage = float(0.0)
-    if materials[object_id[p]].kind == FRACTURE:
-        damage = history[p]
-    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
+    if materials[particles.object_id[p]].kind == FRACTURE:
+        damage = particles.history[p]
+    mass = particles.mass
+    base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
     wx = quadratic_weights(fx[0])
     wy = quadratic_weights(fx[1])
     wz = quadratic_weights(fx[2])
@@ -59,26 +49,19 @@ def damage_to_grid(
         for j in range(3):
             for k in range(3):
                 w = wx[i] * wy[j] * wz[k]
-                wp.atomic_add(node_damage_mass, base[0] + i, base[1] + j, base[2] + k, w * wp.vec2(mass[p] * damage, mass[p]))
-                wp.atomic_max(node_max_damage, base[0] + i, base[1] + j, base[2] + k, damage)
+                wp.atomic_add(cracks.node_damage_mass, base[0] + i, base[1] + j, base[2] + k,
+                              w * wp.vec2(mass[p] * damage, mass[p]))
+                wp.atomic_max(cracks.node_max_damage, base[0] + i, base[1] + j, base[2] + k, damage)
 
 
 @wp.kernel
-def damage_gradient(
-    start: int,
-    x: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.int32),
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    node_damage_mass: wp.array3d(dtype=wp.vec2),
-    gradient: wp.array(dtype=wp.vec3),
-):
+def damage_gradient(start: int, particles: Particles, grid: GridNodes, cracks: Cracks):
     """grad D_p = (4 / dx^2) sum_i w_ip D_i (x_i - x_p), 1/m, with D_i the node's mass-weighted damage."""
     p = wp.tid() + start
-    if free[p] == 1:
+    if particles.free[p] == 1:
         return
-    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
+    dx = grid.dx
+    base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / dx, grid.shape)
     wx = quadratic_weights(fx[0])
     wy = quadratic_weights(fx[1])
     wz = quadratic_weights(fx[2])
@@ -86,32 +69,23 @@ def damage_gradient(
     for i in range(3):
         for j in range(3):
             for k in range(3):
-                node = node_damage_mass[base[0] + i, base[1] + j, base[2] + k]
+                node = cracks.node_damage_mass[base[0] + i, base[1] + j, base[2] + k]
                 offset = dx * (wp.vec3(float(i), float(j), float(k)) - fx)
                 g += (wx[i] * wy[j] * wz[k] * node[0] / node[1]) * offset
-    gradient[p] = (4.0 / (dx * dx)) * g
+    cracks.gradient[p] = (4.0 / (dx * dx)) * g
 
 
 @wp.kernel
-def steepest_gradient(
-    select: int,
-    x: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.int32),
-    gradient: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    node_gradient_norm: wp.array3d(dtype=float),
-    node_direction: wp.array3d(dtype=wp.vec3),
-):
+def steepest_gradient(select: int, particles: Particles, grid: GridNodes, cracks: Cracks):
     """The node's crack direction, the grad D_p of largest norm among the particles whose stencil
     holds it, in two launches: select 0 takes each node's largest |grad D_p|, select 1 writes the
     gradient that has it (ties write equal norms; any one will do)."""
     p = wp.tid()
-    if free[p] == 1:
+    if particles.free[p] == 1:
         return
-    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
-    norm = wp.length(gradient[p])
+    base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
+    gradient = cracks.gradient[p]
+    norm = wp.length(gradient)
     if select == 1 and norm <= 0.0:
         return
     for i in range(3):
@@ -119,9 +93,9 @@ def steepest_gradient(
             for k in range(3):
                 node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
                 if select == 0:
-                    wp.atomic_max(node_gradient_norm, node[0], node[1], node[2], norm)
-                elif norm >= node_gradient_norm[node[0], node[1], node[2]]:
-                    node_direction[node[0], node[1], node[2]] = gradient[p]
+                    wp.atomic_max(cracks.node_gradient_norm, node[0], node[1], node[2], norm)
+                elif norm >= cracks.node_gradient_norm[node[0], node[1], node[2]]:
+                    cracks.node_direction[node[0], node[1], node[2]] = gradient
 
 
 @wp.func
@@ -155,40 +129,34 @@ def crack_contact(v0: wp.vec3, m0: float, v1: wp.vec3, m1: float, direction: wp.
 
 
 class CrackFields:
-    """Node arrays of the crack direction (shape (nx, ny, nz)) and the passes that fill them."""
+    """The crack arrays (`state`, a state.Cracks: node arrays of shape (nx, ny, nz), particle arrays
+    (P,)) and the passes that fill them."""
 
     def __init__(self, shape: tuple[int, int, int], n_particles: int, device: str):
         self.device = device
-        self.node_damage_mass = wp.zeros(shape, dtype=wp.vec2, device=device)
-        self.node_max_damage = wp.zeros(shape, dtype=float, device=device)
-        self.node_gradient_norm = wp.zeros(shape, dtype=float, device=device)
-        self.node_direction = wp.zeros(shape, dtype=wp.vec3, device=device)
-        self.gradient = wp.zeros(n_particles, dtype=wp.vec3, device=device)
+        self.state = Cracks()
+        self.state.node_damage_mass = wp.zeros(shape, dtype=wp.vec2, device=device)
+        self.state.node_max_damage = wp.zeros(shape, dtype=float, device=device)
+        self.state.node_gradient_norm = wp.zeros(shape, dtype=float, device=device)
+        self.state.node_direction = wp.zeros(shape, dtype=wp.vec3, device=device)
+        self.state.gradient = wp.zeros(n_particles, dtype=wp.vec3, device=device)
+        self.state.field_bits = wp.zeros(n_particles, dtype=wp.int32, device=device)
 
     @staticmethod
     def unused(device: str) -> "CrackFields":
-        """One-node stand-ins for the kernels' arguments where no object breaks."""
+        """One-element stand-ins for the kernels' arguments where no object breaks."""
         return CrackFields((1, 1, 1), 1, device)
-
-    def node_arrays(self) -> list:
-        """The per-node arrays, which grid_update clears where it visits."""
-        return [self.node_damage_mass, self.node_max_damage, self.node_gradient_norm, self.node_direction]
 
     def find(self, solver) -> None:
         """Fill the node arrays from the particles' damage (solver: mpm.MPMSolver, before its P2G).
 
         The scatters use atomic maxima and sums, so they run as one launch (a CPU launch is one
         thread, and the copies of P2G's parallel scatter are not needed for four small arrays)."""
-        n = solver.n_particles
-        grid = [solver._origin, solver.grid.dx, solver._shape]
-        wp.launch(damage_to_grid, dim=n, device=self.device, inputs=[
-            solver.x, solver.mass, solver.history, solver.materials, solver.object_id, solver.free, *grid,
-            self.node_damage_mass, self.node_max_damage])
-        solver._per_particle((damage_gradient, lambda s, part: [
-            s, solver.x, solver.free, *grid, self.node_damage_mass, self.gradient]))
+        n, state = solver.n_particles, [solver.particles, solver.nodes, self.state]
+        wp.launch(damage_to_grid, dim=n, device=self.device, inputs=[solver.materials, *state])
+        solver._per_particle((damage_gradient, lambda s, part: [s, *state]))
         for select in (0, 1):  # the largest norm at every node must be known before the one that has it
-            wp.launch(steepest_gradient, dim=n, device=self.device, inputs=[
-                select, solver.x, solver.free, self.gradient, *grid, self.node_gradient_norm, self.node_direction])
+            wp.launch(steepest_gradient, dim=n, device=self.device, inputs=[select, *state])
 
 
 def breaks(materials: list) -> bool:

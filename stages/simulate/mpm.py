@@ -40,6 +40,7 @@ import warp as wp
 
 from .constitutive import initial_history, params_array, update_stress
 from .crack_fields import CrackFields, breaks, crack_contact, crack_field
+from .state import Cracks, GridNodes, Particles, Step
 from .stencil import quadratic_weights, stencil_base
 
 # Nodes this close to a domain face form the wall layer; particles are kept
@@ -73,50 +74,34 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
     node: the one-field kernel, every scene without fracture, carries no per-node crack test."""
 
     @wp.kernel(module="unique")
-    def particle_to_grid(
-        start: int,
-        part: int,
-        x: wp.array(dtype=wp.vec3),
-        v: wp.array(dtype=wp.vec3),
-        C: wp.array(dtype=wp.mat33),
-        mass: wp.array(dtype=float),
-        volume_stress: wp.array(dtype=wp.mat33),
-        force: wp.array(dtype=wp.vec3),
-        origin: wp.vec3,
-        dx: float,
-        dt: float,
-        shape: wp.vec3i,
-        free: wp.array(dtype=wp.int32),
-        node_max_damage: wp.array3d(dtype=float),
-        node_direction: wp.array3d(dtype=wp.vec3),
-        damage_gradient: wp.array(dtype=wp.vec3),
-        field_bits: wp.array(dtype=wp.int32),
-        grid_momentum_mass: wp.array4d(dtype=wp.vec4),
-    ):
+    def particle_to_grid(start: int, part: int, substep: Step, particles: Particles, cracks: Cracks,
+                         grid: GridNodes):
         """Scatter m_p, APIC momentum m_p (v_p + C_p (x_i - x_p)), stress force and external force to the grid.
 
         Node i of the stencil receives w_ip (m_p v_p + dt f_p + A_p (x_i - x_p), m_p) as one vec4, in
-        copy part * n_fields + field. With two fields (crack_fields.py) the field of each of the 27
-        nodes is bit 9 i + 3 j + k of field_bits[p], which G2P reads back.
+        copy part * n_fields + field of grid.momentum_mass. With two fields (crack_fields.py) the field
+        of each of the 27 nodes is bit 9 i + 3 j + k of cracks.field_bits[p], which G2P reads back.
         Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
         """
         p = wp.tid() + start
-        if free[p] == 1:
+        if particles.free[p] == 1:
             return
-        if free[p] == 2:
-            free[p] = 0
+        if particles.free[p] == 2:
+            particles.free[p] = 0
+        dx = grid.dx
+        dt = substep.dt
         inv_dx = 1.0 / dx
-        base, fx = stencil_base(x[p], origin, inv_dx, shape)
+        base, fx = stencil_base(particles.x[p], grid.origin, inv_dx, grid.shape)
         wx = quadratic_weights(fx[0])
         wy = quadratic_weights(fx[1])
         wz = quadratic_weights(fx[2])
-        m = mass[p]
+        m = particles.mass[p]
         # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
-        affine = m * C[p] - (4.0 * dt * inv_dx * inv_dx) * volume_stress[p]
+        affine = m * particles.C[p] - (4.0 * dt * inv_dx * inv_dx) * particles.volume_stress[p]
         # x_i - x_p = dx ((i, j, k) - fx), so the node momentum is linear in (i, j, k): start from the
         # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
         step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
-        corner = m * v[p] + dt * force[p] - dx * (affine * fx)
+        corner = m * particles.v[p] + dt * particles.force[p] - dx * (affine * fx)
         bits = int(0)
         for i in range(3):
             momentum_i = corner + float(i) * step[0]
@@ -129,14 +114,14 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
                     field = int(0)
                     if wp.static(n_fields == 2):
                         node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
-                        field = crack_field(node_max_damage[node[0], node[1], node[2]],
-                                            node_direction[node[0], node[1], node[2]], damage_gradient[p])
+                        field = crack_field(cracks.node_max_damage[node[0], node[1], node[2]],
+                                            cracks.node_direction[node[0], node[1], node[2]], cracks.gradient[p])
                         bits = bits | (field << (9 * i + 3 * j + k))
                     copy = part * wp.static(n_fields) + field
-                    wp.atomic_add(grid_momentum_mass, copy, base[0] + i, base[1] + j, base[2] + k,
+                    wp.atomic_add(grid.momentum_mass, copy, base[0] + i, base[1] + j, base[2] + k,
                                   w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
         if wp.static(n_fields == 2):
-            field_bits[p] = bits
+            cracks.field_bits[p] = bits
 
     return particle_to_grid
 
@@ -145,19 +130,12 @@ PARTICLE_TO_GRID = {n_fields: particle_to_grid_kernel(n_fields) for n_fields in 
 
 
 @wp.kernel
-def stencil_node_box(
-    x: wp.array(dtype=wp.vec3),
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    free: wp.array(dtype=wp.int32),
-    corners: wp.array(dtype=wp.int32),
-):
+def stencil_node_box(particles: Particles, grid: GridNodes, corners: wp.array(dtype=wp.int32)):
     """Smallest (corners[0:3]) and largest (corners[3:6]) stencil corner node of the particles on the grid."""
     p = wp.tid()
-    if free[p] != 0:
+    if particles.free[p] != 0:
         return
-    base, fx = stencil_base(x[p], origin, 1.0 / dx, shape)
+    base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
     for a in range(3):
         wp.atomic_min(corners, a, base[a])
         wp.atomic_max(corners, 3 + a, base[a])
@@ -207,31 +185,13 @@ def grid_update_kernel(n_fields: int) -> wp.Kernel:
     """The grid update compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
     @wp.kernel(module="unique")
-    def grid_update(
-        offset: wp.vec3i,
-        n_parts: int,
-        gravity: wp.vec3,
-        dt: float,
-        shape: wp.vec3i,
-        ground_kind: int,
-        ground_node: int,
-        friction: float,
-        walls: int,
-        keep_unsupported: int,
-        grid_momentum_mass: wp.array4d(dtype=wp.vec4),
-        node_damage_mass: wp.array3d(dtype=wp.vec2),
-        node_max_damage: wp.array3d(dtype=float),
-        node_gradient_norm: wp.array3d(dtype=float),
-        node_direction: wp.array3d(dtype=wp.vec3),
-        grid_velocity: wp.array4d(dtype=wp.vec3),
-        unsupported_velocity: wp.array4d(dtype=wp.vec3),
-    ):
+    def grid_update(offset: wp.vec3i, substep: Step, cracks: Cracks, grid: GridNodes):
         """Per field, v_i = (sum of momenta) / (sum of masses) + dt g; the two fields of a crack in
-        contact (crack_fields.crack_contact); then walls (walls != 0) and ground. Clears the P2G copies
-        and, with two fields, the crack arrays.
+        contact (crack_fields.crack_contact); then walls (substep.walls != 0) and ground. Clears the P2G
+        copies and, with two fields, the crack arrays. Node (0, 0, 0) of the launch is node `offset`.
 
-        With keep_unsupported, the velocity before the ground's contact law is kept as well: rigid
-        bodies meet the ground as whole bodies (rigid.py), not node by node."""
+        With substep.keep_unsupported, the velocity before the ground's contact law is kept as well:
+        rigid bodies meet the ground as whole bodies (rigid.py), not node by node."""
         i, j, k = wp.tid()
         i += offset[0]
         j += offset[1]
@@ -239,31 +199,32 @@ def grid_update_kernel(n_fields: int) -> wp.Kernel:
         node = wp.vec3i(i, j, k)
         total0 = wp.vec4(0.0)
         total1 = wp.vec4(0.0)
-        for part in range(n_parts):
-            total0 += grid_momentum_mass[part * wp.static(n_fields), i, j, k]
-            grid_momentum_mass[part * wp.static(n_fields), i, j, k] = wp.vec4(0.0)
+        for part in range(grid.n_parts):
+            total0 += grid.momentum_mass[part * wp.static(n_fields), i, j, k]
+            grid.momentum_mass[part * wp.static(n_fields), i, j, k] = wp.vec4(0.0)
             if wp.static(n_fields == 2):
-                total1 += grid_momentum_mass[part * 2 + 1, i, j, k]
-                grid_momentum_mass[part * 2 + 1, i, j, k] = wp.vec4(0.0)
-        v0 = node_velocity(total0, gravity, dt, node, shape, walls)
+                total1 += grid.momentum_mass[part * 2 + 1, i, j, k]
+                grid.momentum_mass[part * 2 + 1, i, j, k] = wp.vec4(0.0)
+        v0 = node_velocity(total0, substep.gravity, substep.dt, node, grid.shape, substep.walls)
         v1 = wp.vec3(0.0)
         if wp.static(n_fields == 2):
-            v1 = node_velocity(total1, gravity, dt, node, shape, walls)
+            v1 = node_velocity(total1, substep.gravity, substep.dt, node, grid.shape, substep.walls)
             if total0[3] > 0.0 and total1[3] > 0.0:
-                v0, v1 = crack_contact(v0, total0[3], v1, total1[3], node_direction[i, j, k], node_max_damage[i, j, k])
-            node_damage_mass[i, j, k] = wp.vec2(0.0)
-            node_max_damage[i, j, k] = 0.0
-            node_gradient_norm[i, j, k] = 0.0
-            node_direction[i, j, k] = wp.vec3(0.0)
+                v0, v1 = crack_contact(v0, total0[3], v1, total1[3], cracks.node_direction[i, j, k],
+                                       cracks.node_max_damage[i, j, k])
+            cracks.node_damage_mass[i, j, k] = wp.vec2(0.0)
+            cracks.node_max_damage[i, j, k] = 0.0
+            cracks.node_gradient_norm[i, j, k] = 0.0
+            cracks.node_direction[i, j, k] = wp.vec3(0.0)
         for field in range(wp.static(n_fields)):
             v = v0
             if field == 1:
                 v = v1
-            if keep_unsupported != 0:
-                unsupported_velocity[field, i, j, k] = v
-            if ground_kind != GROUND_NONE and j <= ground_node:
-                v = ground_contact(v, ground_kind, friction)
-            grid_velocity[field, i, j, k] = v
+            if substep.keep_unsupported != 0:
+                grid.unsupported_velocity[field, i, j, k] = v
+            if substep.ground_kind != GROUND_NONE and j <= grid.ground_node:
+                v = ground_contact(v, substep.ground_kind, substep.friction)
+            grid.velocity[field, i, j, k] = v
 
     return grid_update
 
@@ -289,41 +250,27 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
     """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
     @wp.kernel(module="unique")
-    def grid_to_particle(
-        start: int,
-        field_bits: wp.array(dtype=wp.int32),
-        grid_velocity: wp.array4d(dtype=wp.vec3),
-        unsupported_velocity: wp.array4d(dtype=wp.vec3),
-        own_ground: wp.array(dtype=wp.int32),
-        origin: wp.vec3,
-        dx: float,
-        dt: float,
-        shape: wp.vec3i,
-        closed_faces: wp.vec3i,
-        prescribed: wp.array(dtype=wp.int32),
-        prescribed_velocity: wp.array(dtype=wp.vec3),
-        free: wp.array(dtype=wp.int32),
-        x: wp.array(dtype=wp.vec3),
-        v: wp.array(dtype=wp.vec3),
-        C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33),
-    ):
+    def grid_to_particle(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles):
         """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
 
-        closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is closed
-        (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall layer.
-        Particles of bodies that meet the ground themselves (own_ground, rigid) gather the velocity
-        before the ground's contact law. With two fields each node is read in the particle's own
-        field there (field_bits, written by P2G).
+        grid.closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is
+        closed (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall
+        layer. Particles of bodies that meet the ground themselves (own_ground, rigid) gather the
+        velocity before the ground's contact law. With two fields each node is read in the particle's
+        own field there (cracks.field_bits, written by P2G).
         """
         p = wp.tid() + start
-        if free[p] != 0:
+        if particles.free[p] != 0:
             return  # free_flight moves it, or it joins the grid at the next P2G
-        grid = grid_velocity
-        if own_ground[p] != 0:
-            grid = unsupported_velocity
+        velocity = grid.velocity
+        if particles.own_ground[p] != 0:
+            velocity = grid.unsupported_velocity
+        origin = grid.origin
+        dx = grid.dx
+        dt = substep.dt
+        shape = grid.shape
         inv_dx = 1.0 / dx
-        base, fx = stencil_base(x[p], origin, inv_dx, shape)
+        base, fx = stencil_base(particles.x[p], origin, inv_dx, shape)
         wx = quadratic_weights(fx[0])
         wy = quadratic_weights(fx[1])
         wz = quadratic_weights(fx[2])
@@ -347,8 +294,8 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
                 for k in range(3):
                     field = int(0)
                     if wp.static(n_fields == 2):
-                        field = (field_bits[p] >> (9 * i + 3 * j + k)) & 1
-                    vi = grid[field, base[0] + i, base[1] + j, base[2] + k]
+                        field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
+                    vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
                     v_ij += wz[k] * vi
                     vz_ij += oz[k] * vi
                 v_i += wy[j] * v_ij
@@ -359,23 +306,23 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
             By += wx[i] * vy_i
             Bz += wx[i] * vz_i
         Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
-        if prescribed[p] != 0:
-            vp = prescribed_velocity[p]  # velocity and fixed conditions override the grid
+        if particles.prescribed[p] != 0:
+            vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid
         # a closed face keeps particles off its wall layer; through an open one they leave the grid
         lo = float(BOUNDARY_NODES) * dx
-        xp = x[p] + dt * vp - origin
+        xp = particles.x[p] + dt * vp - origin
         for a in range(3):
-            if closed_faces[a] >= 1:
+            if grid.closed_faces[a] >= 1:
                 xp[a] = wp.max(xp[a], lo)
-            if closed_faces[a] == 2:
+            if grid.closed_faces[a] == 2:
                 xp[a] = wp.min(xp[a], float(shape[a] - 1) * dx - lo)
-        x[p] = xp + origin
-        v[p] = vp
-        C[p] = Cp
-        F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * F[p]
-        if not on_grid(x[p], origin, dx, shape, closed_faces, 0.0):
-            free[p] = 1
-            C[p] = wp.mat33(0.0)
+        particles.x[p] = xp + origin
+        particles.v[p] = vp
+        particles.C[p] = Cp
+        particles.F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * particles.F[p]
+        if not on_grid(particles.x[p], origin, dx, shape, grid.closed_faces, 0.0):
+            particles.free[p] = 1
+            particles.C[p] = wp.mat33(0.0)
 
     return grid_to_particle
 
@@ -384,43 +331,26 @@ GRID_TO_PARTICLE = {n_fields: grid_to_particle_kernel(n_fields) for n_fields in 
 
 
 @wp.kernel
-def free_flight(
-    start: int,
-    gravity: wp.vec3,
-    dt: float,
-    origin: wp.vec3,
-    dx: float,
-    shape: wp.vec3i,
-    closed_faces: wp.vec3i,
-    ground_kind: int,
-    ground_node: int,
-    friction: float,
-    mass: wp.array(dtype=float),
-    force: wp.array(dtype=wp.vec3),
-    prescribed: wp.array(dtype=wp.int32),
-    prescribed_velocity: wp.array(dtype=wp.vec3),
-    free: wp.array(dtype=wp.int32),
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-):
+def free_flight(start: int, substep: Step, grid: GridNodes, particles: Particles):
     """Particles off the grid: v += dt (g + f / m), x += dt v (symplectic Euler, as on the grid), the
     ground's contact law below its plane, F frozen. A particle a cell back inside the grid is marked to
     rejoin it (free = 2) at the next P2G."""
     p = wp.tid() + start
-    if free[p] != 1:
+    if particles.free[p] != 1:
         return
-    vp = v[p] + dt * (gravity + force[p] / mass[p])
-    if prescribed[p] != 0:
-        vp = prescribed_velocity[p]
-    xp = x[p] + dt * vp
-    ground_y = origin[1] + float(ground_node) * dx
-    if ground_kind != GROUND_NONE and xp[1] <= ground_y:
-        vp = ground_contact(vp, ground_kind, friction)
+    dt = substep.dt
+    vp = particles.v[p] + dt * (substep.gravity + particles.force[p] / particles.mass[p])
+    if particles.prescribed[p] != 0:
+        vp = particles.prescribed_velocity[p]
+    xp = particles.x[p] + dt * vp
+    ground_y = grid.origin[1] + float(grid.ground_node) * grid.dx
+    if substep.ground_kind != GROUND_NONE and xp[1] <= ground_y:
+        vp = ground_contact(vp, substep.ground_kind, substep.friction)
         xp = wp.vec3(xp[0], ground_y, xp[2])
-    x[p] = xp
-    v[p] = vp
-    if on_grid(xp, origin, dx, shape, closed_faces, 1.0):
-        free[p] = 2
+    particles.x[p] = xp
+    particles.v[p] = vp
+    if on_grid(xp, grid.origin, grid.dx, grid.shape, grid.closed_faces, 1.0):
+        particles.free[p] = 2
 
 
 class MPMSolver:
@@ -432,6 +362,8 @@ class MPMSolver:
     (P,), `free` (P,) flags of the particles off the grid. Conditions write
     `force` (P,3) N, `prescribed` (P,) flags and `prescribed_velocity` (P,3)
     m/s; `rigid` (rigid.RigidBodies or None) projects rigid objects after G2P.
+    The kernels take these arrays grouped in `particles` (state.Particles), the
+    grid in `nodes` (state.GridNodes) and the substep's length and laws in `step` (state.Step).
 
     Args:
         walls: the domain's faces are slip walls; else only the ground (if any) closes it.
@@ -469,16 +401,27 @@ class MPMSolver:
         self._elastic = params_array(materials, device, yielding=False)
         self.rigid = None
         self._pinned = None  # pin(): where substeps leave the particles
+        self.particles = Particles()
+        for name in Particles.vars:
+            setattr(self.particles, name, getattr(self, name))
 
         nx, ny, nz = grid.shape
         # a second velocity field per node where a body can tear (crack_fields.py)
         self.n_fields = 2 if breaks(materials) else 1
         self.crack = CrackFields(grid.shape, n, device) if self.n_fields == 2 else CrackFields.unused(device)
-        self.field_bits = wp.zeros(n, dtype=wp.int32, device=device)
-        self.grid_momentum_mass = wp.zeros((self.n_parts * self.n_fields, nx, ny, nz), dtype=wp.vec4, device=device)
-        self.grid_velocity = wp.zeros((self.n_fields, nx, ny, nz), dtype=wp.vec3, device=device)
-        self.unsupported_velocity = self.grid_velocity  # its own array once rigid bodies are attached
-        self._shape = wp.vec3i(nx, ny, nz)
+        self.nodes = GridNodes()
+        self.nodes.dx = grid.dx
+        self.nodes.shape = wp.vec3i(nx, ny, nz)
+        self.nodes.n_parts = self.n_parts
+        self.nodes.momentum_mass = wp.zeros((self.n_parts * self.n_fields, nx, ny, nz), dtype=wp.vec4, device=device)
+        self.nodes.velocity = wp.zeros((self.n_fields, nx, ny, nz), dtype=wp.vec3, device=device)
+        self.nodes.unsupported_velocity = self.nodes.velocity  # its own array once rigid bodies are attached
+        self.step = Step()
+        self.step.gravity = self.gravity
+        self.step.ground_kind = ground.kind
+        self.step.friction = ground.friction
+        self.step.walls = int(self.walls)
+        self.step.keep_unsupported = 0
         self.ground_height = grid.origin[1] + BOUNDARY_NODES * grid.dx if ground.height is None else ground.height
         # the grid never reaches below where it starts: the ground (if any) stays on it
         self._lowest_origin = grid.origin[1]
@@ -527,41 +470,28 @@ class MPMSolver:
             return np.zeros(3, int), shape
         self._corners.assign(self._no_corners)
         wp.launch(stencil_node_box, dim=self.n_particles, device=self.device,
-                  inputs=[self.x, self._origin, self.grid.dx, self._shape, self.free, self._corners])
+                  inputs=[self.particles, self.nodes, self._corners])
         corners = self._corners.numpy()
         return corners[:3].astype(int), corners[3:].astype(int) + 3
 
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
-        g, dev, crack = self.grid, self.device, self.crack
+        step, cracks, nodes, particles = self.step, self.crack.state, self.nodes, self.particles
+        step.dt = dt
         if self.n_fields == 2:
-            crack.find(self)
-        self._per_particle((PARTICLE_TO_GRID[self.n_fields], lambda s, part: [
-            s, part, self.x, self.v, self.C, self.mass, self.volume_stress, self.force,
-            self._origin, g.dx, dt, self._shape, self.free, crack.node_max_damage,
-            crack.node_direction, crack.gradient, self.field_bits, self.grid_momentum_mass]))
+            self.crack.find(self)
+        self._per_particle((PARTICLE_TO_GRID[self.n_fields], lambda s, part: [s, part, step, particles, cracks, nodes]))
         lo, hi = self._active_nodes()
         if np.all(hi > lo):  # else every particle is off the grid
             update = GRID_UPDATE[self.n_fields]
             self._parallel([
-                (lambda s=s, c=c: wp.launch(update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=dev, inputs=[
-                    wp.vec3i(s, lo[1], lo[2]), self.n_parts, self.gravity, dt, self._shape,
-                    self.ground.kind, self._ground_node, self.ground.friction, int(self.walls),
-                    int(self.rigid is not None), self.grid_momentum_mass, *crack.node_arrays(),
-                    self.grid_velocity, self.unsupported_velocity]))
+                (lambda s=s, c=c: wp.launch(update, dim=(c, hi[1] - lo[1], hi[2] - lo[2]), device=self.device,
+                                            inputs=[wp.vec3i(s, lo[1], lo[2]), step, cracks, nodes]))
                 for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
             ])
-        g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [
-            s, self.field_bits, self.grid_velocity, self.unsupported_velocity, self.own_ground, self._origin, g.dx,
-            dt, self._shape,
-            self._closed_faces, self.prescribed,
-            self.prescribed_velocity, self.free, self.x, self.v, self.C, self.F])
-        flight = (free_flight, lambda s, part: [
-            s, self.gravity, dt, self._origin, g.dx, self._shape, self._closed_faces, self.ground.kind,
-            self._ground_node, self.ground.friction, self.mass, self.force, self.prescribed,
-            self.prescribed_velocity, self.free, self.x, self.v])
-        stress = (update_stress, lambda s, part: [
-            s, self.materials, self.object_id, self.volume, dt, self.F, self.history, self.volume_stress])
+        g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles])
+        flight = (free_flight, lambda s, part: [s, step, nodes, particles])
+        stress = (update_stress, lambda s, part: [s, dt, self.materials, particles])
         if self.rigid is None:
             self._per_particle(flight, g2p, stress)
         else:  # the rigid projection gathers every rigid particle's G2P velocity first
@@ -584,7 +514,8 @@ class MPMSolver:
     def attach_rigid(self, rigid) -> None:
         """Let a rigid.RigidBodies move its members after G2P; they meet the ground as whole bodies."""
         self.rigid = rigid
-        self.unsupported_velocity = wp.zeros_like(self.grid_velocity)
+        self.nodes.unsupported_velocity = wp.zeros_like(self.nodes.velocity)
+        self.step.keep_unsupported = 1
         flags = np.zeros(self.n_particles, np.int32)
         flags[rigid.members.numpy()] = 1
         self.own_ground.assign(flags)
@@ -604,10 +535,10 @@ class MPMSolver:
     def _move_to(self, origin: np.ndarray) -> None:
         """Put the grid's node (0, 0, 0) at `origin` (3,) m; the ground stays on its node plane."""
         self.grid = Grid(origin=tuple(float(o) for o in origin), dx=self.grid.dx, shape=self.grid.shape)
-        self._origin = wp.vec3(*origin.astype(np.float32))
-        self._ground_node = int(round((self.ground_height - origin[1]) / self.grid.dx))
-        on_floor = self.ground.kind != GROUND_NONE and self._ground_node >= BOUNDARY_NODES
-        self._closed_faces = wp.vec3i(2, 2, 2) if self.walls else wp.vec3i(0, int(on_floor), 0)
+        self.nodes.origin = wp.vec3(*origin.astype(np.float32))
+        self.nodes.ground_node = int(round((self.ground_height - origin[1]) / self.grid.dx))
+        on_floor = self.ground.kind != GROUND_NONE and self.nodes.ground_node >= BOUNDARY_NODES
+        self.nodes.closed_faces = wp.vec3i(2, 2, 2) if self.walls else wp.vec3i(0, int(on_floor), 0)
 
     def follow(self, margin: int) -> None:
         """Move the grid by whole cells so that every particle lies `margin` cells inside its wall layer.
