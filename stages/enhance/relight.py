@@ -21,7 +21,7 @@ import numpy as np
 
 from schemas.artifacts import CoarseArtifact
 
-from .compositing import normalised_blur, sample_at
+from .compositing import normalised_blur
 
 log = logging.getLogger("physmotion.enhance.relight")
 
@@ -39,8 +39,6 @@ FLOOR = 0.15
 terminator the photograph holds little but noise and a small error in the normal moves the
 terminator, so dividing by that shading must stay bounded (at 5 %, with gains up to 3, the ball
 shows bright blotches along its terminator)."""
-MAX_GAIN = 2.5
-"""Shading ratios are clipped to [1/MAX_GAIN, MAX_GAIN]."""
 
 
 def to_linear(srgb: np.ndarray) -> np.ndarray:
@@ -99,13 +97,16 @@ def fit_shading(value: np.ndarray, normals: np.ndarray, pixels: np.ndarray) -> t
 
 
 class Relighting:
-    """The shading ratio of every frame of a coarse video, from the light fitted to its photograph.
+    """The light fitted to a coarse video's photograph: its shading, the blur of the normals it was
+    fitted on (sigma_px, output pixels) and those normals at rest (h, w, 3, NaN off the objects).
 
     Use :meth:`fit`, which returns None when one light does not explain the photograph.
+    unseen.Continuation applies it: each pixel's colour is scaled, in linear light, by the shading of
+    where its surface faces now over the shading its source had in the photograph.
     """
 
-    def __init__(self, coarse: CoarseArtifact, shading: Shading, sigma_px: float, rest_normals: np.ndarray):
-        self.coarse, self.shading, self.sigma_px, self.rest_normals = coarse, shading, sigma_px, rest_normals
+    def __init__(self, shading: Shading, sigma_px: float, rest_normals: np.ndarray):
+        self.shading, self.sigma_px, self.rest_normals = shading, sigma_px, rest_normals
 
     @classmethod
     def fit(cls, coarse: CoarseArtifact, photo: np.ndarray) -> Optional["Relighting"]:
@@ -129,21 +130,4 @@ class Relighting:
         direction = shading.light / (np.linalg.norm(shading.light) + 1e-12)
         log.info("relighting: light towards (%.2f, %.2f, %.2f) in the camera frame, ambient %.2f, "
                  "explains %.0f%% of the photograph's brightness", *direction, shading.ambient, 100 * explained)
-        return cls(coarse, shading, sigma, normals)
-
-    def gain(self, t: int, uv: np.ndarray) -> np.ndarray:
-        """(h, w) float32: shading of frame t's surface over the shading its source had in the photograph.
-
-        Args:
-            uv: (h, w, 2) frame t's source points at output resolution (flow.smooth_source).
-        """
-        now = smooth_normals(self.coarse.normal[t], self.coarse.alpha[t], self.sigma_px)
-        then = sample_at(np.nan_to_num(self.rest_normals), uv)
-        then /= np.linalg.norm(then, axis=-1, keepdims=True) + 1e-12
-        ratio = np.clip(self.shading(now) / self.shading(then), 1.0 / MAX_GAIN, MAX_GAIN)
-        ratio = np.where(np.isfinite(uv[..., 0]), ratio, 1.0)  # no source: nothing to re-shade
-        return np.nan_to_num(ratio, nan=1.0).astype(np.float32)
-
-    def __call__(self, t: int, colour: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """Frame t's object colour (h, w, 3) in [0, 255] re-shaded for where its surface faces now."""
-        return to_srgb(to_linear(colour) * self.gain(t, uv)[..., None]).astype(np.float32)
+        return cls(shading, sigma, normals)

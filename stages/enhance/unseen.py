@@ -31,7 +31,7 @@ import numpy as np
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import normalised_blur, resize_to, sample_at
+from .compositing import normalised_blur, sample_at
 from .relight import Relighting, Shading, smooth_normals, to_linear, to_srgb
 
 log = logging.getLogger("physmotion.enhance.unseen")
