@@ -186,6 +186,15 @@ class Simulation:
     def _check_budget(self) -> None:
         """Refuse, before any work, a run whose substeps or recorded frames cannot be afforded; log the estimate."""
         physics = self.physics
+        if physics.dt is not None:
+            bound = self._cfl_substep(0.0)
+            if min(physics.dt, 1.0 / physics.fps) > bound * (1.0 + 1e-9):
+                raise InputError(self.scene_file, "physics.dt",
+                                 f"{physics.dt:g} s is above this scene's CFL bound, {bound:.2e} s (a {1e3 * self.grid.dx:.3g}"
+                                 " mm cell over its fastest elastic wave, its conditions' speeds and a frame of their "
+                                 "forces and free fall), where the explicit solver blows up",
+                                 f"set physics.dt to {float(f'{0.9 * bound:.1e}'):.1e} s or less, or remove it to "
+                                 "let the CFL bound choose each substep")
         per_frame = math.ceil(1.0 / (physics.fps * self.substep_size(0.0)) - 1e-9)
         total = per_frame * (self.n_frames - 1)
         if per_frame > physics.max_substeps_per_frame:
@@ -206,21 +215,26 @@ class Simulation:
         self._substeps_at_rest = total
 
     def _substep_cause(self) -> str:
-        """The scene key that sets the substep: physics.dt, a condition's velocity, or the stiffest material."""
+        """The scene key that sets the substep: physics.dt, a condition's velocity or force, gravity (a frame of
+        free fall), or the stiffest material."""
         if self.physics.dt is not None:
             return "physics.dt"
         speeds = [wave_speed(m) for m in self.materials]
-        if self.speed_hint > max(speeds):
-            return "physics.conditions"
         k = int(np.argmax(speeds))
-        return f"objects[{k}].material.youngs_modulus"
+        causes = {f"objects[{k}].material.youngs_modulus": speeds[k], "physics.conditions": max(
+            self.speed_hint, self.conditions.acceleration / self.physics.fps),
+            "physics.gravity": float(np.linalg.norm(self.gravity_world)) / self.physics.fps}
+        return max(causes, key=causes.get)
 
     def _substep_fix(self) -> str:
         cause = self._substep_cause()
         if cause == "physics.dt":
             return "raise physics.dt (or remove it to use the CFL bound)"
         if cause == "physics.conditions":
-            return "lower the conditions' velocities"
+            return "lower the conditions' velocities and forces"
+        if cause == "physics.gravity":
+            return (f"give physics.gravity a magnitude nearer 9.81 m/s^2 (a frame of free fall sets the substep), "
+                    "or raise physics.max_substeps_per_frame if you mean it")
         return ("lower that youngs_modulus or raise its density (the elastic wave speed sqrt(E / density) sets "
                 "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
 
@@ -478,5 +492,8 @@ class Simulation:
         raise InputError(self.scene_file, f"objects[{k}].material",
                          f"the simulation blew up at frame {f} (t = {f / self.physics.fps:.3f} s): object {k} "
                          f"({self.materials[k].preset}) has {what} with substeps of {h:.2e} s",
+                         ("remove physics.dt (the CFL bound then follows the particles' speed), lower its "
+                          "youngs_modulus or raise its density, or soften the conditions acting on it")
+                         if self.physics.dt is not None else
                          "lower its youngs_modulus or raise its density, set physics.dt below "
                          f"{0.5 * h:.1e} s, or soften the conditions acting on it")
