@@ -117,13 +117,16 @@ def same_file(a: Path | str, b: Path | str) -> bool:
 
 
 def refuse_overwriting(outputs: dict[str, Path], inputs: dict[str, Path]) -> None:
-    """An InputError when an output flag names an input file or another output.
+    """An InputError when an output flag names a folder, an input file or another output.
 
     Args:
         outputs, inputs: flag (e.g. "--out") -> path.
     """
     seen = list(inputs.items())
     for flag, path in outputs.items():
+        if Path(path).is_dir():
+            raise InputError(path, flag, f"{flag} names a folder, where this program writes a file",
+                             f"give {flag} the path of the file to write, such as {Path(path) / Path(path).name}")
         for other, given in seen:
             if given is not None and same_file(path, given):
                 raise InputError(path, flag, f"{flag} names the same file as {other}, which this program "

@@ -5,17 +5,25 @@ import argparse
 import logging
 from pathlib import Path
 
+import numpy as np
 import warp as wp
 
-from schemas import config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
-from schemas.artifacts import GaussiansArtifact, check_lineage, read_artifact, write_artifact
+from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
+from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, check_lineage, read_artifact, write_artifact
 from schemas.files import check_writable, refuse_overwriting
 from schemas.images import write_image
 
+from .constitutive import wave_speed
 from .setup_image import draw_setup
 from .simulation import Simulation
 
 log = logging.getLogger("physmotion.simulate")
+
+# An object whose particles all lie within this share of its rest extent, or more than half of whose mass has
+# a deformation gradient of det F below COLLAPSED_DET (crushed a thousandfold, or inverted), has collapsed:
+# no material does that, only an impact the explicit solver cannot resolve (piled against walls and ground).
+COLLAPSED_EXTENT = 1e-2
+COLLAPSED_DET = 1e-3
 
 DESCRIPTION = """\
 Simulate the reconstructed objects with MLS-MPM (APIC, quadratic B-splines, Warp kernels).
@@ -55,11 +63,48 @@ def simulate(args: argparse.Namespace) -> None:
                      scene_file=scene.file, device=device)
     write_image(setup, draw_setup(sim, gaussians.photo, gaussians.K))
     log.info("wrote %s", setup)
-    trajectories = sim.run()
-    write_artifact(args.out, trajectories, created_by="pm-simulate",
-                   config_hash=config_hash(stage_keys(scene, "simulate")), inputs=digests)
+    try:
+        trajectories = sim.run()
+        refuse_collapsed(trajectories, scene)
+        write_artifact(args.out, trajectories, created_by="pm-simulate",
+                       config_hash=config_hash(stage_keys(scene, "simulate")), inputs=digests)
+    except BaseException:  # setup.png belongs to this run's trajectories: without them it is not left behind
+        setup.unlink(missing_ok=True)
+        raise
     log.info("wrote %s", args.out)
 
 
+def refuse_collapsed(trajectories: TrajectoriesArtifact, scene) -> None:
+    """An InputError, before anything is written, when an object's particles collapse onto a point or invert
+    (COLLAPSED_EXTENT, COLLAPSED_DET) in some frame, naming the fastest impulse or velocity condition as the
+    cause where there is one (else the object's material) and a speed below the material's elastic waves."""
+    rest = trajectories.rest_positions
+    for k, obj in enumerate(scene.objects):
+        sel = trajectories.object_id == k
+        size = float(np.max(np.ptp(rest[sel], axis=0)))
+        masses = trajectories.masses[sel]
+        for f in range(1, len(trajectories.time_s)):
+            extent = float(np.max(np.ptp(trajectories.positions[f, sel], axis=0)))
+            crushed = np.linalg.det(trajectories.F[f, sel].astype(np.float64)) < COLLAPSED_DET
+            if extent > COLLAPSED_EXTENT * size and masses[crushed].sum() <= 0.5 * masses.sum():
+                continue
+            problem = (f"at frame {f} (t = {trajectories.time_s[f]:.3f} s) object {k} ({obj.material.preset}) has "
+                       f"collapsed: its particles span {1e3 * extent:.3g} mm of its {1e3 * size:.3g} mm and "
+                       f"{100 * masses[crushed].sum() / masses.sum():.0f} % of its mass is crushed or inverted "
+                       "(det F below 1e-3), which no material does")
+            speed = wave_speed(obj.material)
+            pushes = [(float(np.linalg.norm(c.velocity)), i) for i, c in enumerate(scene.physics.conditions)
+                      if c.type in ("impulse", "velocity") and c.object == k]
+            if pushes and max(pushes)[0] > 0:
+                fastest, i = max(pushes)
+                raise InputError(scene.file, f"physics.conditions[{i}].velocity",
+                                 f"{problem}: it is driven at {fastest:.3g} m/s, faster than its elastic waves "
+                                 f"({speed:.3g} m/s), into " + ("the walls and the ground" if scene.physics.walls
+                                                                else "the ground"),
+                                 f"give it a speed below {0.5 * speed:.2g} m/s, or a stiffer material "
+                                 f"(objects[{k}].material.youngs_modulus)"
+                                 + (", or turn physics.walls off" if scene.physics.walls else ""))
+            raise InputError(scene.file, f"objects[{k}].material", problem,
+                             f"make objects[{k}].material stiffer (youngs_modulus) or set a smaller physics.dt")
 def main(argv=None) -> None:
     run_main(simulate, build_parser(), argv)

@@ -1,7 +1,11 @@
 """pm-simulate as a program and its building blocks: fill, gravity/frame, regions, errors, the artifact."""
 from __future__ import annotations
 
+import contextlib
+import io
 import math
+import re
+import signal
 
 import cv2
 import numpy as np
@@ -124,16 +128,11 @@ def test_regions_are_in_the_objects_normalised_box():
                                   [False, False, True, False])
 
 
-def test_empty_region_and_blow_up_are_input_errors():
+def test_empty_region_is_an_input_error():
     means, oid = boxes(((0, 0, 0), (0.1, 0.1, 0.1)), spacing=0.01)
     with pytest.raises(InputError, match=r"conditions\[0\]\.region"):
         Simulation(PhysicsConfig(conditions=[{"type": "fixed", "region": {"sphere": [2, 2, 2, 0.1]}}]),
                    [M.Jelly()], means, oid)
-    # a substep 50x beyond the CFL bound blows up; the message names frame, object and fix
-    sim = Simulation(PhysicsConfig(duration_s=0.5, fps=10, grid=16, dt=0.01), [M.Jelly(youngs_modulus=1e6)],
-                     means, oid)
-    with pytest.raises(InputError, match=r"objects\[0\]\.material.*frame \d+.*jelly.*physics\.dt"):
-        sim.run()
 
 
 def test_cfl_substep_shrinks_with_stiffness_and_speed():
@@ -193,3 +192,101 @@ def test_program_refuses_a_bad_scene_with_exit_code_2(tmp_path, capsys):
                   "--out", str(tmp_path / "t.h5"), "--device", "cpu"])
     assert exit_info.value.code == 2
     assert "image" in capsys.readouterr().err
+
+
+# --- bad scenes the schema accepts (issue 33): each ends in a run or one paragraph, leaving nothing behind ---
+
+PHOTO = "image: photo.png\n"
+
+
+def program(tmp_path, scene: str, means=None, object_id=None, out=None) -> tuple[int, str]:
+    """pm-simulate on `scene` (scene.yaml's text after `image:`) and a 10 cm jelly-sized box of Gaussians 0.5 m
+    in front of the camera (or `means`, `object_id`): (exit code, stderr). The run's folder is tmp_path/run."""
+    cv2.imwrite(str(tmp_path / "photo.png"), np.full((120, 160, 3), 128, np.uint8))
+    (tmp_path / "scene.yaml").write_text(PHOTO + scene)
+    if means is None:
+        means, object_id = boxes(((-0.05, 0, 0.5), (0.05, 0.1, 0.6)), spacing=0.01)
+    make_gaussians(tmp_path / "gaussians.h5", means, object_id)
+    out = out or tmp_path / "run" / "trajectories.h5"
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            cli.main(["--scene", str(tmp_path / "scene.yaml"), "--gaussians", str(tmp_path / "gaussians.h5"),
+                      "--out", str(out), "--device", "cpu"])
+            code = 0
+        except SystemExit as exit_info:
+            code = exit_info.code
+    return code, err.getvalue()
+
+
+def refused(code: int, err: str, field: str) -> str:
+    """The paragraph of a refusal (exit 2) naming `field`, without a traceback."""
+    assert code == 2, err
+    assert f"field '{field}'" in err and "Fix:" in err and "Traceback" not in err, err
+    return err
+
+
+def left_in(tmp_path) -> list:
+    run = tmp_path / "run"
+    return sorted(p.name for p in run.iterdir()) if run.exists() else []
+
+
+JELLY = "objects:\n  - {size_m: 0.1, material: {preset: jelly}}\n"
+
+
+def test_a_dt_above_the_cfl_bound_is_refused_up_front_and_the_advice_runs(tmp_path):
+    """physics.dt 1 s (and 0.04 s, which a halving advice would have offered) is refused before any work,
+    naming physics.dt and a value; that value runs to the end with finite positions."""
+    for dt in (1.0, 0.04):
+        err = refused(*program(tmp_path, JELLY + f"physics: {{duration_s: 0.2, fps: 10, grid: 12, dt: {dt}}}\n"),
+                      "physics.dt")
+        assert left_in(tmp_path) == []
+    advice = float(re.search(r"set physics.dt to ([0-9.e+-]+) s or less", err).group(1))
+    code, err = program(tmp_path, JELLY + f"physics: {{duration_s: 0.2, fps: 10, grid: 12, dt: {advice}}}\n")
+    assert code == 0, err
+    tr = read_artifact(tmp_path / "run" / "trajectories.h5", TrajectoriesArtifact)
+    assert np.isfinite(tr.positions).all() and np.ptp(tr.positions[-1], axis=0).max() > 0.05
+
+
+def test_a_huge_gravity_is_blamed_on_physics_gravity(tmp_path):
+    code, err = program(tmp_path, JELLY + "physics: {duration_s: 0.2, fps: 10, grid: 12, gravity: [0, 1.0e6, 0]}\n")
+    assert "9.81" in refused(code, err, "physics.gravity")
+    assert left_in(tmp_path) == []
+
+
+def test_an_impact_that_collapses_a_body_is_refused_naming_its_velocity_and_the_advice_runs(tmp_path):
+    """A soft jelly thrown at 37 m/s between walls piles into a corner (the solver clamps particles onto the
+    walls): refused, naming the impulse's velocity, nothing written; at the speed the message advises it runs
+    and keeps its size."""
+    scene = JELLY + ("physics:\n  duration_s: 0.2\n  fps: 10\n  grid: 12\n  walls: true\n"
+                     "  conditions: [{type: impulse, velocity: [30, -20, 10]}]\n")
+    err = refused(*program(tmp_path, scene), "physics.conditions[0].velocity")
+    assert "collapsed" in err and left_in(tmp_path) == []
+    speed = float(re.search(r"a speed below ([0-9.e+-]+) m/s", err).group(1))
+    direction = np.array([30, -20, 10]) / np.linalg.norm([30, -20, 10])
+    code, err = program(tmp_path, scene.replace("[30, -20, 10]", str([float(v) for v in 0.9 * speed * direction])))
+    assert code == 0, err
+    tr = read_artifact(tmp_path / "run" / "trajectories.h5", TrajectoriesArtifact)
+    assert np.ptp(tr.positions[-1], axis=0).max() > 0.5 * np.ptp(tr.positions[0], axis=0).max()
+
+
+def test_a_failed_run_leaves_no_setup_png(tmp_path, monkeypatch):
+    """setup.png belongs to the trajectories: a run stopped (SIGINT) or failed after drawing it removes it."""
+    from schemas.program import Stopped
+
+    scene = JELLY + "physics: {duration_s: 0.2, fps: 10, grid: 12}\n"
+    for failure, expected in ((Stopped(signal.SIGINT), 128 + signal.SIGINT), (MemoryError(), 2)):
+        def fail(self, failure=failure):
+            assert (tmp_path / "run" / "setup.png").exists()  # drawn before the run, for a look at it
+            raise failure
+        monkeypatch.setattr(Simulation, "run", fail)
+        code, err = program(tmp_path, scene)
+        assert code == expected and "Traceback" not in err, err
+        assert left_in(tmp_path) == []
+
+
+def test_out_given_as_a_folder_is_refused_up_front(tmp_path):
+    (tmp_path / "run" / "trajectories.h5").mkdir(parents=True)
+    code, err = program(tmp_path, JELLY)
+    assert code == 2 and "--out" in err and "folder" in err and "Traceback" not in err, err
+    assert left_in(tmp_path) == ["trajectories.h5"]
