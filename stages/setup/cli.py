@@ -33,9 +33,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def open_folder(folder: Path, image: Path | None) -> None:
-    """Create the folder and put the photograph in it; a new scene's scene.yaml is written on the first save."""
-    folder.mkdir(parents=True, exist_ok=True)
+def check_image(image: Path | None) -> None:
+    """Refuse a --image that is missing, not a PNG or JPEG, or does not decode; before anything is made."""
     if image is None:
         return
     if not image.is_file():
@@ -43,9 +42,34 @@ def open_folder(folder: Path, image: Path | None) -> None:
     if image.suffix.lower() not in sf.IMAGE_SUFFIXES:
         raise InputError(image, None, "not a .png, .jpg or .jpeg file", "give a PNG or JPEG photograph")
     sf.decode_image(image.read_bytes(), str(image))
+
+
+def open_folder(folder: Path, image: Path | None) -> None:
+    """Create the folder and put the (checked) photograph in it; a new scene's scene.yaml is written on the
+    first save."""
+    folder.mkdir(parents=True, exist_ok=True)
+    if image is None:
+        return
     target = folder / image.name
     if not target.exists() or not target.samefile(image):
         shutil.copyfile(image, target)
+
+
+def listen(host: str, port: int):
+    """A socket listening on host:port, or an InputError naming --port when it cannot."""
+    import socket
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+        sock.listen(128)  # from now on a browser's connection waits for the server instead of being refused
+    except OSError as err:
+        sock.close()
+        raise InputError("--port", None, f"cannot listen on {host}:{port} ({err.strerror})",
+                         "give another --port, or 0 for any free one") from None
+    return sock
 
 
 def serve(args: argparse.Namespace) -> None:
@@ -55,22 +79,16 @@ def serve(args: argparse.Namespace) -> None:
 
     from .server import make_app
 
+    # the photograph and the port first: a refused start leaves no folder and no copied photograph behind
+    check_image(args.image)
+    sock = listen(args.host, args.port)
     open_folder(args.folder, args.image)
     app = make_app(args.folder, args.device)
     setup = app.state.setup
     if args.image is not None:
         setup.use_photo(args.image.name)
-    family = socket.AF_INET6 if ":" in args.host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((args.host, args.port))
-        sock.listen(128)  # from now on a browser's connection waits for the server instead of being refused
-    except OSError as err:
-        raise InputError("--port", None, f"cannot listen on {args.host}:{args.port} ({err.strerror})",
-                         "give another --port, or 0 for any free one") from None
     host, port = sock.getsockname()[:2]
-    shown = f"[{host}]" if family == socket.AF_INET6 else host
+    shown = f"[{host}]" if sock.family == socket.AF_INET6 else host
     print(f"pm-setup: scene folder {setup.folder}\npm-setup: open http://{shown}:{port}/", flush=True)
     uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False)).run(sockets=[sock])
 

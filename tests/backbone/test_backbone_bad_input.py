@@ -79,3 +79,29 @@ def test_a_scene_file_that_is_not_utf8_is_refused(tmp_path):
     (tmp_path / "scene.yaml").write_bytes(b"image: photo\xff.png\n")
     with pytest.raises(InputError, match="UTF-8"):
         load_scene(tmp_path / "scene.yaml")
+
+
+def test_pm_setup_refused_at_start_leaves_nothing_behind(tmp_path, capsys):
+    """pm-setup with a missing --image makes no scene folder; with its port taken it copies no photograph."""
+    import socket
+
+    from stages.setup import cli as setup_cli
+
+    from .conftest import make_photo
+
+    def start(*args) -> int:
+        with pytest.raises(SystemExit) as exit_info:
+            setup_cli.main([*map(str, args), "--device", "cpu"])
+        assert "Traceback" not in capsys.readouterr().err
+        return exit_info.value.code
+
+    folder = tmp_path / "scene"
+    assert start(folder, "--image", tmp_path / "missing.png", "--port", "0") == 2
+    assert not folder.exists()
+    (tmp_path / "photos").mkdir()
+    photo = make_photo(tmp_path / "photos")
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen(1)
+        assert start(folder, "--image", photo, "--port", taken.getsockname()[1]) == 2
+    assert not folder.exists()
