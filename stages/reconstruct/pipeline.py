@@ -30,6 +30,9 @@ MAX_PHOTO_PX = 4096
 20000 x 20000 photograph took minutes and 4.7 GB at full size with no word in the log, while the
 optimisation works at reconstruct.resolution (at most 2048) and the video at render.width (at most 4096)."""
 NEAR_PLANE_M = float(NEAR_PLANE)
+# An object spanning this much of the view (degrees) and still reaching the near plane is a field of view
+# wider than the photograph's, not a wrong size.
+WIDE_SPAN_DEG = 90.0
 MAX_GAUSSIANS = 30000
 """Initial Gaussians of all objects at most: keeps 600 iterations at 256 px within about 3 minutes
 on 2 CPU cores (benchmarks/RESULTS.md); larger objects are sampled every 2nd, 3rd... pixel."""
@@ -86,6 +89,12 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
         log.info("object %d: front depth %.3f-%.3f m, back up to %.3f m", k, np.nanmin(d.front),
                  np.nanmax(d.front), np.nanmax(d.back))
         if not np.nanmin(d.front) > NEAR_PLANE_M:  # written so that NaN fails too
+            span = view_span_deg(labels == k + 1, K)
+            if span >= WIDE_SPAN_DEG:  # the angle, not the size: a body of any size would stand at the camera
+                raise InputError(scene.file, "camera.fov_deg", f"at fov_deg {scene.camera.fov_deg:g} object {k} "
+                                 f"spans {span:.0f} degrees of the view, too wide for a body to stand in front of "
+                                 "the camera", "give camera.fov_deg the photograph's own vertical field of view "
+                                 "(a phone's main camera about 40-70 degrees)")
             raise InputError(scene.file, f"objects[{k}].size_m", f"an object of {scene.objects[k].size_m:g} m "
                              f"covering its pixels stands {np.nanmin(d.front):.3g} m from the camera, nearer than the "
                              f"renderer sees ({NEAR_PLANE_M:g} m)", "give the object's real size in metres")
@@ -96,6 +105,15 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
             log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
     return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, seen,
                     volumes)
+
+
+def view_span_deg(mask: np.ndarray, K: np.ndarray) -> float:
+    """The larger of the horizontal and vertical angles in degrees between the rays through the outer edges
+    of a mask's (H,W) pixels, camera intrinsics K (3,3)."""
+    rows, cols = np.nonzero(mask)
+    spans = [np.degrees(np.arctan((hi + 1 - K[a, 2]) / K[a, a]) - np.arctan((lo - K[a, 2]) / K[a, a]))
+             for a, lo, hi in ((0, cols.min(), cols.max()), (1, rows.min(), rows.max()))]
+    return float(max(spans))
 
 
 def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depths: list[ObjectDepth],
