@@ -105,3 +105,30 @@ def test_pm_setup_refused_at_start_leaves_nothing_behind(tmp_path, capsys):
         taken.listen(1)
         assert start(folder, "--image", photo, "--port", taken.getsockname()[1]) == 2
     assert not folder.exists()
+
+
+@pytest.mark.parametrize("fov", [120, 170])
+def test_a_field_of_view_too_wide_for_the_object_is_blamed_on_camera_fov_deg(tmp_path, capsys, fov):
+    """The tiny scene's disc spans 92 degrees at fov_deg 120, which runs, and 164 at 170, where no body of any
+    size stands in front of the camera: refused under camera.fov_deg (not size_m, with a negative distance),
+    nothing written."""
+    from stages.reconstruct import cli as reconstruct_cli
+
+    scene = tiny_scene_dict()
+    scene["camera"]["fov_deg"] = fov
+    scene["reconstruct"]["iterations"] = 0
+    path = write_scene(tmp_path / "scene", scene)
+    out = tmp_path / "run" / "gaussians.h5"
+    try:
+        reconstruct_cli.main(["--scene", str(path), "--out", str(out), "--device", "cpu"])
+        code = 0
+    except SystemExit as exit_info:
+        code = exit_info.code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    if code == 0:
+        assert fov == 120 and out.exists()
+    else:
+        assert code == 2 and "field 'camera.fov_deg'" in err and "size_m" not in err and "-0." not in err, err
+        assert not out.exists()
+    assert (code == 0) == (fov == 120)
