@@ -36,9 +36,10 @@ import torch
 from scipy.spatial import cKDTree
 
 import splat
+from schemas.camera import project_points
 from schemas.materials import PRESETS
 
-from .source_map import project, to_camera
+from .source_map import to_camera
 
 GRAIN_SIGMA = 0.5
 """Standard deviation of a fill particle's Gaussian at rest, in lattice spacings. Neighbours half a
@@ -214,7 +215,7 @@ def exposure(positions: torch.Tensor, sigma: torch.Tensor, means: torch.Tensor, 
     depths = nearest + layer_depth * torch.arange(int(layer.max()) + 1, device=device, dtype=z.dtype)
     transmittance = transmittance_layers(means, covariances, opacities, depths, camera)
     K = torch.as_tensor(camera.K, dtype=positions.dtype, device=device)
-    uv = project(in_camera, K)
+    uv = project_points(in_camera, K)
     sigma_px2 = (sigma * K[0, 0] / z.clamp_min(1e-9)) ** 2 + DILATION_PX2
     half = int(math.ceil(float(REACH_SIGMAS * sigma_px2.max().sqrt()))) + 1
     steps = torch.arange(-half, half + 1, device=device)
@@ -258,7 +259,7 @@ def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, spacing: t
                                   covariances=surface_covariances)
         K = torch.as_tensor(camera.K, dtype=rest_positions.dtype, device=device)
         in_camera = to_camera(rest_positions, camera.world_to_camera)
-        uv = project(in_camera, K)
+        uv = project_points(in_camera, K)
         opaque = (surface.alpha >= OPAQUE_ALPHA).cpu().numpy().astype(np.uint8)
         # px from each opaque pixel's centre to the nearest pixel that is not (0 on those)
         room = torch.as_tensor(cv2.distanceTransform(opaque, cv2.DIST_L2, cv2.DIST_MASK_PRECISE), device=device)

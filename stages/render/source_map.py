@@ -14,6 +14,7 @@ from scipy.spatial import cKDTree
 
 import splat
 from schemas.artifacts import GaussiansArtifact
+from schemas.camera import project_points
 
 MIN_ALPHA = 1.0 / 255
 """Below this accumulated alpha a pixel shows no surface: source_uv is NaN there."""
@@ -58,11 +59,6 @@ def to_camera(points: torch.Tensor, world_to_camera) -> torch.Tensor:
     return points @ w2c[:3, :3].T + w2c[:3, 3]
 
 
-def project(points_cam: torch.Tensor, K: torch.Tensor) -> torch.Tensor:
-    """(N, 3) camera-frame points -> (N, 2) image points of intrinsics K (pixel centres at +0.5)."""
-    return points_cam[:, :2] / points_cam[:, 2:3].clamp_min(1e-9) * torch.stack([K[0, 0], K[1, 1]]) + K[:2, 2]
-
-
 def visibility(surface: splat.Render, means: torch.Tensor, covariances: torch.Tensor,
                camera: splat.Camera) -> torch.Tensor:
     """(G,) in [0, 1]: how visible each Gaussian is in a render of them, by a soft depth test.
@@ -80,7 +76,7 @@ def visibility(surface: splat.Render, means: torch.Tensor, covariances: torch.Te
     """
     K = torch.as_tensor(camera.K, dtype=means.dtype, device=means.device)
     in_camera = to_camera(means, camera.world_to_camera)
-    uv = project(in_camera, K)
+    uv = project_points(in_camera, K)
     col = uv[:, 0].floor().long().clamp(0, camera.width - 1)
     row = uv[:, 1].floor().long().clamp(0, camera.height - 1)
     distance = in_camera.norm(dim=1)
@@ -152,7 +148,7 @@ def affine_source_maps(rest_means: torch.Tensor, means: torch.Tensor, normals: t
     d_project = torch.stack([torch.stack([K_photo[0, 0] / z, zero, -K_photo[0, 0] * rest_cam[:, 0] / z ** 2], -1),
                              torch.stack([zero, K_photo[1, 1] / z, -K_photo[1, 1] * rest_cam[:, 1] / z ** 2], -1)], 1)
     J = d_project @ R @ to_rest
-    b = project(rest_cam, K_photo) - (J @ project(centre, K_frame)[..., None])[..., 0]
+    b = project_points(rest_cam, K_photo) - (J @ project_points(centre, K_frame)[..., None])[..., 0]
     return torch.cat([b, J.reshape(-1, 4)], 1)
 
 

@@ -44,6 +44,8 @@ from scipy.ndimage import (binary_dilation, binary_erosion, binary_fill_holes, d
                            gaussian_filter)
 from scipy.spatial import cKDTree
 
+from schemas.camera import project_points
+
 # Inside when at least this many of the six axis rays see odd parity.
 INSIDE_VOTES = 4
 # The shell is closed with a ball of this quantile of the means' nearest-neighbour distances
@@ -125,7 +127,7 @@ def silhouette_gap(means: np.ndarray, mask: np.ndarray, K: np.ndarray) -> float:
     perimeter = up * sum(cv2.arcLength(c, True) for c in contours)
     if perimeter <= 0 or len(means) < 2:
         return 0.0
-    uv = up * ((means[:, :2] / means[:, 2:3]) * K[[0, 1], [0, 1]] + K[:2, 2])
+    uv = up * project_points(means, K)
     radius = closing_radius(uv, 1.0)  # in drawn pixels, as the fill's in lattice cells
     H, W = mask.shape
     ij = np.floor(uv).astype(int) + radius  # drawn on a canvas padded by the closing's radius

@@ -10,6 +10,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from schemas.camera import project_points
+
 OBJECT_COLOURS = [(80, 200, 255), (255, 160, 60), (120, 255, 120), (255, 90, 200), (200, 200, 200)]  # BGR
 CONDITION_COLOUR = {"impulse": (0, 0, 255), "velocity": (0, 140, 255), "force": (255, 0, 255),
                     "torque": (255, 255, 0), "fixed": (60, 60, 60)}
@@ -17,8 +19,7 @@ CONDITION_COLOUR = {"impulse": (0, 0, 255), "velocity": (0, 140, 255), "force": 
 
 def _project(K: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Pixel coordinates (N,2) of world points (N,3) in the input camera (world = camera frame)."""
-    z = np.maximum(points[:, 2:3], 1e-6)
-    return (points @ K.T)[:, :2] / z
+    return project_points(points, K)
 
 
 def _pt(p) -> tuple[int, int]:

@@ -21,6 +21,7 @@ import warp as wp
 
 from schemas import InputError
 from schemas.artifacts import TrajectoriesArtifact
+from schemas.camera import project_points
 from schemas.materials import PRESETS
 
 from . import domain, rest_state
@@ -452,7 +453,7 @@ class Simulation:
             return
         K, (height, width) = self._camera
         z = x[:, 2]
-        uv = x[:, :2] / np.maximum(z, 1e-9)[:, None] * K[[0, 1], [0, 1]] + K[:2, 2]
+        uv = project_points(x, K)
         n = int(np.count_nonzero((z <= 0) | (uv[:, 0] < 0) | (uv[:, 1] < 0) | (uv[:, 0] > width)
                                  | (uv[:, 1] > height)))
         if n != self._outside_logged and (abs(n - self._outside_logged) >= 0.01 * len(self.masses) or n == 0
