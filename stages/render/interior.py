@@ -11,9 +11,12 @@ a Gaussian of its own (as PhysGaussian renders its filled particles):
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
 Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
-surface Gaussians included, becomes a round grain of its share of the volume
-(:func:`grain_shapes`: hard, opaque discs for sand and snow, soft for a torn solid),
-and grains of granular materials each take a brightness of their own (:func:`grain_shades`).
+surface Gaussians included, becomes a grain (:func:`grain_shapes`). A torn solid's
+grains are soft and round, of its share of the volume, in the colour it had. Sand and
+snow become hard grains one lattice spacing across, elongated and turned at random,
+each in the photograph's colour where its rest position projects (:func:`rest_ray_colours`:
+a two-coloured body's inside keeps the colour of the part it belongs to, so its heap
+shows both), each a little brighter or darker at the same hue (:func:`grain_colours`).
 
 At rest the interior must stay hidden behind the surface, so that frame 0 is the
 reconstruction's render. The lattice's outer cells reach up to a cell past the
@@ -33,7 +36,9 @@ import math
 import cv2
 import numpy as np
 import torch
+from scipy import ndimage
 from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
 
 import splat
 from schemas.camera import project_points
@@ -53,7 +58,7 @@ OPAQUE_SURFACE = 0.5
 """Opacity from which a surface Gaussian gives its colour to the interior under it (fainter ones are
 the reconstruction's soft edges and floaters, whose colours are mixed with the background's)."""
 GRANULAR = ("sand", "snow")
-"""The presets whose particles read as grains once they flow (grain_shades)."""
+"""The presets whose particles read as hard grains of the photograph's colours once they flow."""
 GRAIN_OPACITY = 50.0
 """Opacity of a grain of granular material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
 a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
@@ -63,6 +68,11 @@ GRAIN_SHADE = 0.13
 """Spread (standard deviation) of the grains' brightness relative to their colour: measured on
 scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
 quarter of a grain against the mean over a few grains (0.19 at an eighth, 0.13 at a quarter)."""
+GRAIN_ELONGATION = 1.5
+"""A granular grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
+2 (a heap of round discs reads as bubbles, not sand)."""
+EDGE_PX = 2
+"""Pixels inside its silhouette from which the photograph gives a granular particle its colour."""
 FLOW_NEIGHBOURS = 8
 """Nearest particles at rest whose motion relative to a particle tells whether its material flows (Mixing)."""
 HIDDEN_TRANSMITTANCE = 1.0 / 255
@@ -114,32 +124,80 @@ def surface_under(rest_positions: np.ndarray, object_id: np.ndarray, surface_mea
     return under
 
 
-def grain_shapes(volumes: np.ndarray, material_id: np.ndarray, opacities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(P,) standard deviation (m) and (P,) opacity of each particle as a grain of its share of the
-    material, once its material flows (Mixing): a ball whose alpha is 1/2 at GRAIN_SIGMA sqrt(2 ln 2)
-    cube roots of its volume (V^(1/3): the side of its share) from its centre, so that neighbours
-    overlap and a heap is opaque. Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY;
-    of the others, of the particle's own opacity (opacities, (P,)) and standard deviation
+def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarray,
+                 opacities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P, 3, 3) covariance (m^2) and (P,) opacity of each particle as a grain of the material, once
+    its material flows (Mixing).
+
+    Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY the size of the lattice: an
+    ellipsoid whose alpha is 1/2 on the surface of volume (4/3) pi r^3, r = GRAIN_SIGMA sqrt(2 ln 2)
+    spacing (so neighbours overlap and a heap is opaque), its long axis GRAIN_ELONGATION times its
+    two short ones, turned at random (seeded: the same for every run). Every grain is the same size
+    whatever volume its particle carries: a surface Gaussian on a side wall carries the volume the
+    closed body lacks (stages/simulate/fill.py) and would grow into a disc many grains wide.
+    Of the other materials, a round soft grain of the particle's own opacity and standard deviation
     GRAIN_SIGMA V^(1/3): a torn face reads as solid material, not as grains.
 
     Args:
-        volumes: (P,) m^3; material_id: (P,) index into schemas.materials.PRESETS.
+        volumes: (P,) m^3; spacing: (P,) each particle's lattice spacing, m (lattice_spacing; finite
+            where its object has a lattice); material_id: (P,) index into schemas.materials.PRESETS;
+            opacities: (P,).
     """
     granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
     opacity = np.where(granular, GRAIN_OPACITY, opacities)
     # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
-    half_alpha_radius = GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * np.cbrt(volumes)
-    return np.where(granular, half_alpha_radius / np.sqrt(2 * np.log(2 * GRAIN_OPACITY)),
-                    GRAIN_SIGMA * np.cbrt(volumes)), opacity
+    half_alpha_radius = GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * np.where(np.isfinite(spacing), spacing, 0.0)
+    hard_sigma = half_alpha_radius / math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
+    axes = GRAIN_ELONGATION ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
+    turns = Rotation.random(len(volumes), random_state=0).as_matrix()
+    hard = np.einsum("pij,j,pkj->pik", turns, axes ** 2, turns) * hard_sigma[:, None, None] ** 2
+    soft = np.eye(3) * (GRAIN_SIGMA * np.cbrt(volumes))[:, None, None] ** 2
+    return np.where(granular[:, None, None], hard, soft), opacity
 
 
-def grain_shades(material_id: np.ndarray) -> np.ndarray:
-    """(P,) each particle's relative brightness as a grain, GRAIN_SHADE times a standard normal number
-    (seeded: the same for every run), for the particles of granular materials (GRANULAR); 0 for the
-    others. A heap of grains of one colour is not one flat colour: each grain's facets catch the light
-    differently."""
+def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray,
+                     K: np.ndarray, world_to_camera: np.ndarray) -> np.ndarray:
+    """(N, 3) in [0, 1]: the photograph's colour where each point projects at rest, read at the nearest
+    pixel of its own object that lies at least EDGE_PX inside the object's silhouette (the silhouette's
+    own pixels mix the object's colour with the background's; a point that projects off its object, a
+    side wall's, takes the colour of the object next to it).
+
+    Args:
+        rest_positions: (N, 3) world, m; object_id: (N,).
+        photo: (H, W, 3) u8 RGB; labels: (H, W) 0 background, k + 1 object k (gaussians.h5's mask);
+        K: (3, 3) the photograph's intrinsics; world_to_camera: (4, 4).
+    """
+    in_camera = rest_positions @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
+    uv = project_points(in_camera, K)
+    H, W = labels.shape
+    col = np.clip(np.floor(uv[:, 0]), 0, W - 1).astype(np.int64)
+    row = np.clip(np.floor(uv[:, 1]), 0, H - 1).astype(np.int64)
+    colours = np.zeros((len(rest_positions), 3))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1))
+    for k in np.unique(object_id):
+        own = (labels == k + 1).astype(np.uint8)
+        inner = cv2.erode(own, disc)
+        source = inner if inner.any() else own
+        if not source.any():
+            continue
+        members = object_id == k
+        nearest_row, nearest_col = ndimage.distance_transform_edt(source == 0, return_distances=False,
+                                                                  return_indices=True)
+        r, c = nearest_row[row[members], col[members]], nearest_col[row[members], col[members]]
+        colours[members] = photo[r, c] / 255.0
+    return colours
+
+
+def grain_colours(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
+    """(P, 3) each particle's colour as a grain: for granular materials (GRANULAR) ``colours`` (P, 3)
+    in [0, 1] scaled by 1 + GRAIN_SHADE n, n a standard normal number cut at +-2 (seeded: the same for
+    every run), and no further than the brightest channel reaches 1, so that every grain keeps its
+    colour's hue; the others' colours unchanged. A heap of grains of one colour is not one flat
+    colour: each grain's facets catch the light differently."""
     granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
-    return np.where(granular, GRAIN_SHADE * np.random.default_rng(0).standard_normal(len(material_id)), 0.0)
+    shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(material_id)), -2, 2)
+    shade = np.minimum(shade, 1 / np.maximum(colours.max(1), 1e-6))
+    return np.where(granular[:, None], colours * shade[:, None], colours)
 
 
 class Mixing:

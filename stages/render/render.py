@@ -27,10 +27,11 @@ import torch
 
 import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
+from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, INTERIOR_OPACITY, Mixing, grain_shades, grain_shapes, hidden_at_rest,
-                       lattice_spacing, surface_under)
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_shapes,
+                       hidden_at_rest, lattice_spacing, rest_ray_colours, surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -50,16 +51,17 @@ class Particles(NamedTuple):
     """Every particle of the trajectories as rendered: the G Gaussians, then the fill particles
     (interior.py). Tensors (P, ...) on the render device.
 
-    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2, and
-    grain_opacities (P,), the shape and opacity a particle takes as its material flows
-    (interior.Mixing): a round grain of its share of the volume, hard for sand and snow
-    (interior.grain_shapes; its rest covariance and opacity where its object has no lattice);
-    opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
-    (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3);
-    rest_seen (P,) visibility in the photograph (source_map.rest_visibility; 0 for the interior);
-    rest_normals (P, 3) world frame (the interior takes the normal of the surface it lies under);
-    surface (P,) 1 for a Gaussian, 0 for the interior; grain_shade (P,) the relative brightness a
-    grain of granular material takes as it flows (interior.grain_shades), 0 for the others.
+    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2,
+    grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
+    its material flows (interior.Mixing): a soft round grain of its share of the volume in its own
+    colour, or for sand and snow a hard grain of the lattice's size in the photograph's colour on its
+    rest ray, shaded (interior.grain_shapes, grain_colours; its rest covariance and opacity where its
+    object has no lattice); opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show
+    at rest (interior.hidden_at_rest), which is transparent until its material flows, else 1;
+    colors (P, 3) at rest (a fill particle: that of the surface it lies under, or for sand and snow the
+    photograph's on its rest ray); rest_seen (P,) visibility in the photograph
+    (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
+    takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior.
     """
 
     rest_means: torch.Tensor
@@ -70,10 +72,10 @@ class Particles(NamedTuple):
     grain_opacities: torch.Tensor
     opaque_at_rest: torch.Tensor
     colors: torch.Tensor
+    grain_colors: torch.Tensor
     rest_seen: torch.Tensor
     rest_normals: torch.Tensor
     surface: torch.Tensor
-    grain_shade: torch.Tensor
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,) surface weights of a frame
@@ -84,7 +86,7 @@ class Particles(NamedTuple):
         photograph), and 0 for the interior."""
         mixed = self.mixing(positions, F)
         shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
-        colors = (self.colors * (1 + mixed * self.grain_shade)[:, None]).clamp(0, 1)
+        colors = ((1 - mixed[:, None]) * self.colors + mixed[:, None] * self.grain_colors).clamp(0, 1)
         opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
         return F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
 
@@ -107,26 +109,34 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     sigma, hidden = hidden_at_rest(fill_means, GRAIN_SIGMA * spacing[G:], spacing[G:], means, covariances, opacities,
                                    camera)
     N = len(sigma)
+    granular = np.isin(trajectories.material_id, [PRESETS.index(p) for p in GRANULAR])
+    on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
+                                     gaussians.photo, gaussians.mask, gaussians.K,
+                                     gaussians.world_to_camera)).to(colors.dtype)
+    fill_colors = torch.where(t(granular[G:])[:, None], on_rest_ray[G:], colors[under])
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
     rest_covariances = torch.cat([covariances, sigma[:, None, None] ** 2 * eye])
     opacities = torch.cat([opacities, torch.full((N,), INTERIOR_OPACITY, dtype=opacities.dtype, device=device)])
-    grain_sigma, grain_opacities = grain_shapes(trajectories.volumes, trajectories.material_id, opacities.cpu().numpy())
-    grain = t(grain_sigma).to(spacing.dtype)[:, None, None]
+    grain_shape, grain_opacities = grain_shapes(trajectories.volumes, spacing.cpu().numpy(), trajectories.material_id,
+                                                opacities.cpu().numpy())
+    rest_colors = torch.cat([colors, fill_colors])
+    grain_from = torch.where(t(granular)[:, None], on_rest_ray, rest_colors).cpu().numpy()
     rest_means = torch.cat([means, fill_means])
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
-        grain_covariances=torch.where(spacing.isfinite()[:, None, None], grain ** 2 * eye, rest_covariances),
+        grain_covariances=torch.where(spacing.isfinite()[:, None, None], t(grain_shape).to(covariances.dtype),
+                                      rest_covariances),
         mixing=Mixing(rest_means, trajectories.object_id, spacing),
         opacities=opacities,
         grain_opacities=torch.where(spacing.isfinite(), t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
-        colors=torch.cat([colors, colors[under]]),
+        colors=rest_colors,
+        grain_colors=t(grain_colours(grain_from, trajectories.material_id)).to(colors.dtype),
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
         rest_normals=torch.cat([normals, normals[under]]),
-        surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
-        grain_shade=t(grain_shades(trajectories.material_id)).to(colors.dtype))
+        surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]))
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,

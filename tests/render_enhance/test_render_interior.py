@@ -14,7 +14,8 @@ import splat
 from schemas import materials as M
 from schemas.scene import PhysicsConfig
 from stages.enhance.flow import enhance_frames
-from stages.render.interior import grain_shapes, surface_under, transmittance_layers
+from stages.render.interior import (GRAIN_ELONGATION, GRAIN_SIGMA, grain_shapes, surface_under,
+                                    transmittance_layers)
 from schemas.artifacts import TrajectoriesArtifact
 from stages.render.render import render_video
 from stages.simulate.fill import fill_object
@@ -207,23 +208,41 @@ def test_transmittance_layers_are_the_render_of_the_gaussians_in_front():
         np.testing.assert_allclose(layers[l].numpy(), 1 - alone.alpha.numpy(), atol=1e-5)
 
 
-def test_a_grain_of_sand_is_a_hard_disc_of_its_share_of_the_volume():
-    """A granular grain alone, rendered by splat face-on: alpha 1/2 at GRAIN_SIGMA sqrt(2 ln 2) cube roots
-    of its volume from its centre (as the soft grain of the other materials), and falling from 0.9 to 0.1
-    within a quarter of that radius plus a pixel, where the soft grain takes over 1.4 radii."""
-    volume = 0.03 ** 3
-    sigma, opacity = grain_shapes(np.array([volume, volume]), np.array([M.PRESETS.index("sand"),
-                                                                        M.PRESETS.index("jelly")]), np.ones(2))
+def test_a_grain_of_sand_is_a_hard_grain_the_size_of_the_lattice():
+    """A granular grain alone, rendered by splat face-on: its alpha >= 1/2 covers the projection of an
+    ellipsoid of the volume of a ball of radius GRAIN_SIGMA sqrt(2 ln 2) spacings (float64: the picture
+    of the ellipsoid x^T C^-1 x <= 2 ln(2 opacity)), elongated GRAIN_ELONGATION; along a row through its
+    centre its alpha falls from 0.9 to 0.1 within a quarter of its half-alpha radius there plus a pixel,
+    where the soft grain of a torn solid (round, of its share of the volume) takes over 1.4 radii. The
+    grains are turned at random: their long axes' mean |component| along each axis is that of
+    directions uniform on the sphere, 1/2."""
+    volume, spacing = 0.03 ** 3, 0.03
+    materials = np.array([M.PRESETS.index("sand")] * 999 + [M.PRESETS.index("jelly")])
+    shapes, opacity = grain_shapes(np.full(1000, volume), np.full(1000, spacing), materials, np.ones(1000))
+    radius = GRAIN_SIGMA * np.sqrt(2 * np.log(2)) * spacing
+    level = 2 * np.log(2 * opacity[0])  # alpha 1/2 on x^T C^-1 x = level
+    half_axes = np.sqrt(np.linalg.eigvalsh(shapes[:999]) * level)
+    np.testing.assert_allclose(half_axes.prod(1), radius ** 3, rtol=1e-9)
+    np.testing.assert_allclose(half_axes[:, 2] / half_axes[:, 0], GRAIN_ELONGATION, rtol=1e-9)
+    long_axes = np.linalg.eigh(shapes[:999])[1][:, :, 2]
+    assert np.abs(np.abs(long_axes).mean(0) - 0.5).max() < 0.03
     size, focal = 201, 2000.0
     K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]])
     camera = splat.Camera(K, np.eye(4), size, size)
-    radius_px = 0.5 * np.sqrt(2 * np.log(2)) * np.cbrt(volume) * focal
     widths = []
-    for s, o in zip(sigma, opacity):
+    for C, o in zip(shapes[[0, -1]], opacity[[0, -1]]):
         grain = splat.rasterize(torch.tensor([[0.0, 0.0, 1.0]]), torch.tensor([float(o)]), torch.ones(1, 1), camera,
-                                covariances=torch.eye(3)[None] * float(s) ** 2)
-        profile = grain.alpha[size // 2, size // 2:].numpy()  # from the centre pixel outwards
+                                covariances=torch.as_tensor(C, dtype=torch.float32)[None])
+        alpha = grain.alpha.numpy()
+        profile = alpha[size // 2, size // 2:]  # from the centre pixel outwards
         r = np.arange(len(profile))
-        assert abs(np.interp(0.5, profile[::-1], r[::-1]) - radius_px) < 1.0
-        widths.append(np.interp(0.1, profile[::-1], r[::-1]) - np.interp(0.9, profile[::-1], r[::-1]))
-    assert widths[0] <= 0.25 * radius_px + 1 and widths[1] > 1.4 * radius_px
+        half_px = np.interp(0.5, profile[::-1], r[::-1])
+        widths.append((np.interp(0.1, profile[::-1], r[::-1]) - np.interp(0.9, profile[::-1], r[::-1]), half_px))
+        if o > 1:
+            projected = np.linalg.inv(C[:2, :2] * focal ** 2)
+            rows, cols = np.mgrid[0:size, 0:size] + 0.5 - size / 2
+            pixels = np.stack([cols, rows], -1)
+            inside = np.einsum("...i,ij,...j->...", pixels, projected, pixels) <= np.log(2 * o) * 2
+            assert abs(int((alpha >= 0.5).sum()) - int(inside.sum())) <= 0.02 * inside.sum() + 2 * np.sqrt(inside.sum())
+    (hard, hard_radius), (soft, soft_radius) = widths
+    assert hard <= 0.25 * hard_radius + 1 and soft > 1.4 * soft_radius

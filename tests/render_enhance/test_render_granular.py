@@ -1,0 +1,137 @@
+"""pm-render's granular material: a heap of sand shows the colours of the sand that fell.
+
+A ball of surfels (test_render_flow.surfel_sphere) photographed half orange (left) and half green
+(right). Its back, which the photograph never saw, is painted all green, as a closure that got the
+unseen side wrong would paint it: the photograph is the only truth on what colour the inside is. It
+slumps as sand under pm-simulate's own Simulation; the coarse render's heap is measured against the
+share of each colour at rest and against the lattice's spacing."""
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from schemas import materials as M
+from schemas.scene import PhysicsConfig
+from stages.render.interior import EDGE_PX, GRAIN_SHADE, grain_colours, rest_ray_colours
+from stages.render.render import render_video
+from stages.simulate.simulation import Simulation
+
+from .test_render_flow import surfel_sphere
+
+SIZE, FOCAL, RADIUS, DISTANCE = 96, 240.0, 0.1, 1.0
+ORANGE, GREEN = np.array([0.95, 0.55, 0.15]), np.array([0.45, 0.75, 0.20])
+
+
+def two_coloured_ball():
+    """surfel_sphere photographed orange left of its centre and green right of it; its front surfels
+    take the photograph's colour, its back surfels all green."""
+    gaussians = surfel_sphere(size=SIZE, focal=FOCAL, radius_m=RADIUS, distance_m=DISTANCE)
+    rows, cols = np.mgrid[0:SIZE, 0:SIZE] + 0.5
+    disc = np.hypot(cols - SIZE / 2, rows - SIZE / 2) < RADIUS * FOCAL / DISTANCE
+    photo = np.where((cols < SIZE / 2)[..., None], ORANGE, GREEN)
+    gaussians.photo[:] = np.where(disc[..., None], np.round(255 * photo), 0).astype(np.uint8)
+    gaussians.mask[:] = disc
+    front = gaussians.means[:, 2] < DISTANCE
+    gaussians.colors[:] = np.where((front & (gaussians.means[:, 0] < 0))[:, None], ORANGE, GREEN)
+    return gaussians
+
+
+@pytest.fixture(scope="module")
+def heap():
+    gaussians = two_coloured_ball()
+    physics = PhysicsConfig(duration_s=0.4, fps=10, grid=24, ground={"enabled": True, "type": "friction",
+                                                                      "friction": 0.5})
+    trajectories = Simulation(physics, [M.Sand(friction_angle_deg=30)], gaussians.means, gaussians.object_id,
+                              device="cpu").run()
+    return gaussians, trajectories, render_video(gaussians, trajectories, width=SIZE, device="cpu")
+
+
+def orange_share(rgb: np.ndarray, alpha: np.ndarray) -> float:
+    """Of the solid pixels (alpha > 0.5), the share nearer in chromaticity (colour over its sum, so
+    brightness does not count) to ORANGE than to GREEN."""
+    colour = rgb[alpha > 0.5].astype(np.float64) / alpha[alpha > 0.5, None]
+    chroma = colour / colour.sum(1, keepdims=True).clip(1e-6)
+    to = lambda c: np.linalg.norm(chroma - c / c.sum(), axis=1)  # noqa: E731
+    return float((to(ORANGE) < to(GREEN)).mean())
+
+
+def test_the_heap_keeps_both_colours(heap):
+    """The ball slumps (its picture at least 20 % lower), and each colour's share of the heap's pixels
+    stays within 40 % of its share at rest."""
+    _, _, coarse = heap
+    height = [np.ptp(np.nonzero((a > 0.5).any(1))[0]) for a in (coarse.alpha[0], coarse.alpha[-1])]
+    assert height[1] < 0.8 * height[0], f"the ball did not slump: {height} px high"
+    at_rest = orange_share(coarse.rgb[0], coarse.alpha[0])
+    assert 0.4 < at_rest < 0.6
+    last = orange_share(coarse.rgb[-1], coarse.alpha[-1])
+    for share, rest in ((last, at_rest), (1 - last, 1 - at_rest)):
+        assert abs(share - rest) <= 0.4 * rest, f"orange {100 * at_rest:.0f} % at rest, {100 * last:.0f} % in the heap"
+
+
+def test_grains_are_the_size_of_the_lattice(heap):
+    """The heap reads as grains of the particle spacing, not as discs many grains wide: of its pixels
+    of one flat colour (4-connected, within 1/255 of a neighbour's), 95 % lie in patches of at most
+    twice the picture of a disc one spacing across; and the grains vary in brightness."""
+    _, trajectories, coarse = heap
+    fill = trajectories.rest_positions[~trajectories.is_gaussian].astype(np.float64)
+    spacing = float(np.median(cKDTree(fill).query(fill, k=2)[0][:, 1]))
+    grain_px = np.pi * (spacing / 2 * FOCAL / DISTANCE) ** 2
+    rgb, solid = coarse.rgb[-1].astype(np.int16), coarse.alpha[-1] > 0.99
+    same = lambda a, b: (np.abs(a - b).max(-1) <= 1)  # noqa: E731
+    # flat patches: pixels joined to a right or lower neighbour of the same colour
+    joined = np.zeros(solid.shape, np.uint8)
+    right = same(rgb[:, 1:], rgb[:, :-1]) & solid[:, 1:] & solid[:, :-1]
+    down = same(rgb[1:], rgb[:-1]) & solid[1:] & solid[:-1]
+    edges = [(r * SIZE + c, r * SIZE + c + 1) for r, c in zip(*np.nonzero(right))]
+    edges += [(r * SIZE + c, (r + 1) * SIZE + c) for r, c in zip(*np.nonzero(down))]
+    parent = np.arange(SIZE * SIZE)
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+    for a, b in edges:
+        parent[root(a)] = root(b)
+    labels = np.array([root(i) for i in range(SIZE * SIZE)]).reshape(SIZE, SIZE)
+    sizes = np.bincount(labels[solid].ravel())
+    pixels_in = np.sort(sizes[labels[solid]])
+    assert pixels_in[int(0.95 * len(pixels_in))] <= 2 * grain_px, f"{grain_px:.0f} px a grain"
+    brightness = cv2.cvtColor(coarse.rgb[-1], cv2.COLOR_RGB2GRAY)[solid].astype(float)
+    assert brightness.std() > 0.3 * GRAIN_SHADE * brightness.mean()
+
+
+def test_rest_ray_colour_is_the_photograph_where_the_point_projects():
+    """rest_ray_colours against a brute-force reference: each point projected by K, and the photograph
+    read at the nearest pixel (by centre distance) of its own object at least EDGE_PX inside it."""
+    rng = np.random.default_rng(4)
+    H, W = 40, 60
+    photo = rng.integers(0, 256, (H, W, 3)).astype(np.uint8)
+    labels = np.zeros((H, W), np.uint8)
+    labels[5:30, 5:28], labels[8:35, 32:55] = 1, 2
+    K = np.array([[50.0, 0, W / 2], [0, 50.0, H / 2], [0, 0, 1]])
+    points = np.c_[rng.uniform(-0.7, 0.7, (300, 1)), rng.uniform(-0.5, 0.5, (300, 1)), rng.uniform(0.9, 1.1, (300, 1))]
+    object_id = rng.integers(0, 2, 300)
+    colours = rest_ray_colours(points, object_id, photo, labels, K, np.eye(4))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1))
+    for p, k, colour in zip(points, object_id, colours):
+        pixel = np.floor(np.clip(p[:2] / p[2] * 50.0 + K[:2, 2], 0, [W - 1e-6, H - 1e-6])).astype(int)
+        rows, cols = np.nonzero(cv2.erode((labels == k + 1).astype(np.uint8), disc))
+        d = (cols - pixel[0]) ** 2 + (rows - pixel[1]) ** 2
+        allowed = {tuple(photo[r, c]) for r, c in zip(rows[d == d.min()], cols[d == d.min()])}
+        assert tuple(np.round(colour * 255).astype(int)) in allowed
+
+
+def test_grain_shades_keep_the_hue():
+    """Every grain's colour is its colour times one factor (the hue kept), at most 1 in every channel,
+    and the factors spread by about GRAIN_SHADE where no channel caps them."""
+    rng = np.random.default_rng(2)
+    colours = rng.uniform(0.05, 1.0, (4000, 3))
+    sand = np.full(4000, M.PRESETS.index("sand"))
+    shaded = grain_colours(colours, sand)
+    factor = shaded / colours
+    np.testing.assert_allclose(factor, factor[:, :1].repeat(3, 1), rtol=1e-9)
+    assert shaded.max() <= 1 + 1e-12
+    dark = colours.max(1) < 0.6  # no cap within the factors' +-2 GRAIN_SHADE
+    assert abs(factor[dark, 0].std() / GRAIN_SHADE - 1) < 0.15
+    np.testing.assert_array_equal(grain_colours(colours, np.full(4000, M.PRESETS.index("jelly"))), colours)
