@@ -144,7 +144,7 @@ class TrajectoriesArtifact(Artifact):
     """trajectories.h5, written by pm-simulate. P particles (the G Gaussians first), T frames."""
 
     SCHEMA: ClassVar[str] = "physmotion.trajectories"
-    VERSION: ClassVar[int] = 2
+    VERSION: ClassVar[int] = 3
     NONEMPTY: ClassVar[tuple] = ("P", "G", "T")
 
     rest_positions: Annotated[Array, _f("/particles/rest_positions", "f4", "P,3")]
@@ -153,6 +153,8 @@ class TrajectoriesArtifact(Artifact):
     material_id: Annotated[Array, _f("/particles/material_id", "i4", "P")]
     object_id: Annotated[Array, _f("/particles/object_id", "i4", "P")]
     is_gaussian: Annotated[Array, _f("/particles/is_gaussian", "bool", "P")]
+    # m, the spacing of the lattice every object's fill particles lie on at rest (one for all objects)
+    lattice_spacing: Annotated[float, _f("/particles@lattice_spacing")]
     positions: Annotated[Array, _f("/frames/positions", "f4", "T,P,3", frames=True)]
     F: Annotated[Array, _f("/frames/F", "f4", "T,P,3,3", frames=True)]
     time_s: Annotated[Array, _f("/diagnostics/time_s", "f8", "T")]

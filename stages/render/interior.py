@@ -88,20 +88,18 @@ DILATION_PX2 = 0.3
 """splat's EWA dilation of every projected covariance (px^2)."""
 
 
-def lattice_spacing(rest_positions: np.ndarray, is_gaussian: np.ndarray, object_id: np.ndarray) -> np.ndarray:
-    """(P,) the fill lattice's spacing (m) of each particle's object: the median distance from its fill
-    particles to their nearest neighbour (fill.py lays one regular lattice per object); inf for an
-    object with fewer than two.
+def lattice_spacing(spacing: float, is_gaussian: np.ndarray, object_id: np.ndarray) -> np.ndarray:
+    """(P,) the fill lattice's spacing (m) of each particle's object: `spacing`, trajectories.h5's
+    /particles@lattice_spacing; inf for an object with fewer than two fill particles (no lattice).
 
     Args:
-        rest_positions: (P, 3) the particles at rest, m; is_gaussian, object_id: (P,).
+        is_gaussian, object_id: (P,).
     """
-    spacing = np.full(len(rest_positions), np.inf)
+    per_particle = np.full(len(object_id), np.inf)
     for k in np.unique(object_id):
-        points = rest_positions[(object_id == k) & ~is_gaussian]
-        if len(points) >= 2:
-            spacing[object_id == k] = np.median(cKDTree(points).query(points, k=2)[0][:, 1])
-    return spacing
+        if np.count_nonzero((object_id == k) & ~is_gaussian) >= 2:
+            per_particle[object_id == k] = spacing
+    return per_particle
 
 
 def surface_under(rest_positions: np.ndarray, object_id: np.ndarray, surface_means: np.ndarray,

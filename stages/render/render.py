@@ -104,7 +104,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     under = t(surface_under(trajectories.rest_positions[fill], trajectories.object_id[fill], gaussians.means,
                             gaussians.object_id, gaussians.opacities))
     fill_means = t(trajectories.rest_positions[fill]).to(means.dtype)
-    spacing = t(lattice_spacing(trajectories.rest_positions, trajectories.is_gaussian,
+    spacing = t(lattice_spacing(trajectories.lattice_spacing, trajectories.is_gaussian,
                                 trajectories.object_id)).to(means.dtype)
     sigma, hidden = hidden_at_rest(fill_means, GRAIN_SIGMA * spacing[G:], spacing[G:], means, covariances, opacities,
                                    camera)

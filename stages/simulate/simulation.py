@@ -423,7 +423,8 @@ class Simulation:
         return TrajectoriesArtifact(
             rest_positions=self.rest_world, volumes=self.volumes, masses=self.masses, material_id=self.material_id,
             object_id=self.object_id, is_gaussian=np.arange(P) < G, positions=positions, F=F, time_s=times,
-            fps=float(self.physics.fps), duration_s=float(self.physics.duration_s), **diag)
+            lattice_spacing=float(self.spacing), fps=float(self.physics.fps),
+            duration_s=float(self.physics.duration_s), **diag)
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:
         """Store frame f: world positions, world F of every particle, and the diagnostics."""

@@ -33,7 +33,7 @@ def random_trajectories(T=3, P=9, G=4, seed=1) -> TrajectoriesArtifact:
         object_id=np.zeros(P), is_gaussian=np.arange(P) < G, positions=r.random((T, P, 3)),
         F=r.random((T, P, 3, 3)), time_s=np.arange(T) / 8, substeps=np.full(T, 5.0), kinetic_energy=r.random(T),
         potential_energy=r.random(T), momentum=r.random((T, 3)), angular_momentum=r.random((T, 3)),
-        max_speed=r.random(T), fps=8.0, duration_s=0.25)
+        max_speed=r.random(T), lattice_spacing=0.01, fps=8.0, duration_s=0.25)
 
 
 def random_coarse(T=2, h=4, w=6, seed=2) -> CoarseArtifact:
@@ -111,7 +111,7 @@ def test_wrong_version_is_refused(tmp_path):
 
 
 def test_trajectories_of_the_gaussians_only_layout_are_refused(tmp_path):
-    """Version 1 held F for the G Gaussians only (T,G,3,3); version 2 holds it for every particle."""
+    """Version 1 held F for the G Gaussians only (T,G,3,3); later versions hold it for every particle."""
     write_artifact(tmp_path / "t.h5", random_trajectories(), created_by="pm-simulate", config_hash="h")
     with h5py.File(tmp_path / "t.h5", "a") as f:
         f.attrs["schema_version"] = 1
@@ -120,7 +120,7 @@ def test_trajectories_of_the_gaussians_only_layout_are_refused(tmp_path):
     with pytest.raises(InputError) as info:
         read_artifact(tmp_path / "t.h5", TrajectoriesArtifact)
     assert info.value.field == "schema_version" and "version 1" in info.value.problem
-    assert "reads version 2" in info.value.problem and "rerun" in info.value.fix
+    assert f"reads version {TrajectoriesArtifact.VERSION}" in info.value.problem and "rerun" in info.value.fix
 
 
 def test_missing_dataset_is_named(tmp_path):

@@ -79,7 +79,7 @@ def spun(gaussians: GaussiansArtifact, turns_deg) -> TrajectoriesArtifact:
         object_id=np.zeros(G), is_gaussian=np.ones(G, bool), positions=positions,
         F=np.broadcast_to(turns[:, None], (T, G, 3, 3)), time_s=np.arange(T) / 8.0, substeps=zeros,
         kinetic_energy=zeros, potential_energy=zeros, momentum=np.zeros((T, 3)), angular_momentum=np.zeros((T, 3)),
-        max_speed=zeros, fps=8.0, duration_s=(T - 1) / 8)
+        max_speed=zeros, lattice_spacing=0.01, fps=8.0, duration_s=(T - 1) / 8)
 
 
 def luma(rgb: np.ndarray) -> np.ndarray:

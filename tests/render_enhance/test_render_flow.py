@@ -57,7 +57,8 @@ def translated(gaussians: GaussiansArtifact, shifts_px) -> TrajectoriesArtifact:
         rest_positions=gaussians.means, volumes=np.ones(G), masses=np.ones(G), material_id=np.zeros(G),
         object_id=np.zeros(G), is_gaussian=np.ones(G, bool), positions=positions, F=np.tile(np.eye(3), (T, G, 1, 1)),
         time_s=np.arange(T) / 8.0, substeps=zeros, kinetic_energy=zeros, potential_energy=zeros,
-        momentum=np.zeros((T, 3)), angular_momentum=np.zeros((T, 3)), max_speed=zeros, fps=8.0, duration_s=(T - 1) / 8)
+        momentum=np.zeros((T, 3)), angular_momentum=np.zeros((T, 3)), max_speed=zeros, lattice_spacing=0.01, fps=8.0,
+        duration_s=(T - 1) / 8)
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from stages.render.interior import (GRAIN_ELONGATION, GRAIN_SIGMA, grain_shapes,
                                     transmittance_layers)
 from schemas.artifacts import TrajectoriesArtifact
 from stages.render.render import render_video
-from stages.simulate.fill import fill_object
+from stages.simulate.fill import fill_object, lattice_spacing
 from stages.simulate.simulation import Simulation
 
 from .test_render_flow import reconstruction_render, surfel_sphere
@@ -53,7 +53,7 @@ def torn_in_two(gaussians) -> TrajectoriesArtifact:
         material_id=np.full(P, M.PRESETS.index("fracture")), object_id=np.zeros(P), is_gaussian=np.arange(P) < G,
         positions=positions, F=np.tile(np.eye(3), (T, P, 1, 1)), time_s=np.arange(T) / 10.0, substeps=zeros,
         kinetic_energy=zeros, potential_energy=zeros, momentum=np.zeros((T, 3)), angular_momentum=np.zeros((T, 3)),
-        max_speed=zeros, fps=10.0, duration_s=0.2)
+        max_speed=zeros, lattice_spacing=lattice_spacing(0.02, 8), fps=10.0, duration_s=0.2)
 
 
 @pytest.fixture(scope="module", params=sorted(SIMULATED) + [TORN_IN_TWO])

@@ -19,6 +19,8 @@ from schemas.scene import PhysicsConfig, SphereRegion
 from stages.simulate import cli, domain
 from stages.simulate.conditions import region_members
 from stages.simulate.fill import carry_volume, fill_object, silhouette_gap
+from scipy.spatial import cKDTree
+
 from stages.simulate.simulation import Simulation
 from testing.particles import box_surface, boxes, fibonacci_sphere
 
@@ -181,6 +183,9 @@ def test_program_writes_trajectories_and_setup_png(tmp_path):
     assert set(np.unique(tr.material_id)) == {M.PRESETS.index("jelly"), M.PRESETS.index("metal")}
     assert tr.masses[tr.object_id == 1].sum() == pytest.approx(3000 * 0.08 ** 3, rel=0.25)
     assert tr.substeps[1] >= 1 and np.all(np.isfinite(tr.kinetic_energy))
+    for k in (0, 1):  # the written lattice spacing is each fill's nearest-neighbour distance
+        fill = tr.rest_positions[(tr.object_id == k) & ~tr.is_gaussian].astype(np.float64)
+        assert np.median(cKDTree(fill).query(fill, k=2)[0][:, 1]) == pytest.approx(tr.lattice_spacing, rel=1e-5)
     setup = cv2.imread(str(tmp_path / "run" / "setup.png"))
     assert setup.shape == (120, 160, 3)
 
