@@ -10,6 +10,13 @@ the dilation ring around the object shows at rest, where the video should look
 like the photograph, and a copied patch of another material (the table's wood
 where the cup stood on its saucer) would outline the object. So the fill
 cross-fades from diffusion at the seam to exemplar past twice the dilation.
+
+The objects' own shadows go too: an object that moves away takes its shadow
+with it (the enhancement draws it anew under the object, stages/enhance/shadow.py).
+A shadow is a smooth darkening of the ground near an object, so it is found as
+the filled photograph's brightness, smoothed past its texture, against the
+brightness around it (a high percentile over twice the object's size), and
+divided out of every channel (docs/decisions/0025-shadows.md).
 """
 from __future__ import annotations
 
@@ -18,6 +25,7 @@ import logging
 import cv2
 import numpy as np
 from patchmatch_cython import inpaint_pyramid
+from scipy import ndimage
 
 log = logging.getLogger("physmotion.reconstruct.background")
 
@@ -36,6 +44,59 @@ SEAM_WIDTH = 2
 """Width of the cross-fade from diffusion to exemplar fill, in dilation radii. Measured on the
 coffee scene, whose ring shows around the cup at rest: frame-0 PSNR 36.7 dB with Telea alone,
 34.4 / 36.1 / 36.5 dB with 1 / 2 / 3 radii, 32.6 dB with exemplar alone."""
+
+
+SHADOW_WORKING_PX = 32
+"""The shadow is estimated on a copy in which the objects' size (the square root of their pixel
+count) is this many pixels, smoothed by one of them: the example ball's shadow is 4 of them tall."""
+SHADOW_REFERENCE = (2.0, 80)
+"""The unshadowed brightness at a pixel: this percentile of the smoothed brightness over a window of
+this many object sizes across and a quarter of that high (a shadow fills less than a fifth of it;
+the ground's brightness changes with its distance, from row to row)."""
+SHADOW_REACH = 1.0
+"""Shadows are looked for up to this many object sizes from the objects' masks."""
+SHADOW_DEPTH = (0.08, 0.16)
+"""Darkening (1 - brightness / unshadowed brightness) below which a pixel is taken as unshadowed,
+and from which it is taken in full; smooth between. Both are raised by the texture that smoothing
+leaves (TEXTURE_SPREADS)."""
+TEXTURE_SPREADS = 4.0
+"""A pixel counts as darkened only past this many robust standard deviations of the darkening away
+from the objects, where the ground's own texture left after smoothing sets it: the exemplar fill of
+a coarse periodic texture (tests/reconstruct) would otherwise read as a shadow."""
+MAX_SHADOW = 0.8
+"""Darkening divided out at most: deeper, the ground's colour is mostly noise."""
+
+
+def photographed_shadow(background: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(H, W) float32 in [0, MAX_SHADOW]: how much the objects' shadows darken the (filled) photograph,
+    0 where no shadow is found. Darkening is measured on the sRGB values' mean: a shadow scales linear
+    light, and so (up to sRGB's linear toe) scales sRGB values too."""
+    objects = labels > 0
+    size = float(np.sqrt(objects.sum()))
+    height, width = labels.shape
+    scale = min(1.0, SHADOW_WORKING_PX / max(size, 1.0))
+    small = (max(1, round(width * scale)), max(1, round(height * scale)))
+    brightness = cv2.resize(background.astype(np.float32).mean(-1), small, interpolation=cv2.INTER_AREA)
+    smooth = cv2.GaussianBlur(brightness, (0, 0), max(1.0, size * scale / SHADOW_WORKING_PX))
+    across = SHADOW_REFERENCE[0] * size * scale
+    window = (2 * round(across / 8) + 1, 2 * round(across / 2) + 1)
+    unshadowed = ndimage.percentile_filter(smooth, SHADOW_REFERENCE[1], size=window, mode="nearest")
+    dark = np.clip(1 - smooth / np.maximum(unshadowed, 1.0), 0, MAX_SHADOW)
+    inside = cv2.resize(objects.astype(np.uint8), small, interpolation=cv2.INTER_NEAREST)
+    away = cv2.distanceTransform(1 - inside, cv2.DIST_L2, 3) / max(size * scale, 1e-6)
+    ground = dark[away > 0.25]
+    spread = 1.4826 * float(np.median(np.abs(ground - np.median(ground)))) if ground.size else 0.0
+    low = max(SHADOW_DEPTH[0], TEXTURE_SPREADS * spread)
+    taken = np.clip((dark - low) / (SHADOW_DEPTH[1] - SHADOW_DEPTH[0]), 0, 1)
+    near = np.clip((SHADOW_REACH - away) / (0.25 * SHADOW_REACH), 0, 1)
+    shadow = dark * taken * taken * (3 - 2 * taken) * near
+    return np.clip(cv2.resize(shadow, (width, height), interpolation=cv2.INTER_LINEAR), 0, MAX_SHADOW)
+
+
+def without_shadow(background: np.ndarray, shadow: np.ndarray) -> np.ndarray:
+    """(H, W, 3) u8: ``background`` with ``shadow`` (H, W, from photographed_shadow) divided out."""
+    lifted = background.astype(np.float32) / (1 - shadow[..., None])
+    return np.where(shadow[..., None] > 0, np.clip(lifted + 0.5, 0, 255), background).astype(np.uint8)
 
 
 def exemplar_fill(photo: np.ndarray, hole: np.ndarray) -> np.ndarray:
@@ -57,10 +118,11 @@ def dilation_px(height: int, width: int) -> int:
 
 
 def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """RGB u8 (H,W,3): ``photo`` with every object (``labels`` > 0), dilated, filled from the rest of it.
+    """RGB u8 (H,W,3): ``photo`` with every object (``labels`` > 0), dilated, filled from the rest of it,
+    and the objects' shadows divided out (:func:`photographed_shadow`).
 
-    Pixels outside the dilated objects are the photograph's, unchanged; the fill is the same on
-    every run (fixed seed)."""
+    Pixels outside the dilated objects and their shadows are the photograph's, unchanged; the fill is
+    the same on every run (fixed seed)."""
     radius = dilation_px(*labels.shape)
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
     hole = cv2.dilate((labels > 0).astype(np.uint8), kernel)
@@ -72,8 +134,10 @@ def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
     except ValueError as error:  # no whole patch of background left at some level of the pyramid
         log.warning("background: %s; the objects cover too much of the photograph to copy patches from, "
                     "so their place is filled by diffusion alone", error)
-        return np.where(hole[..., None] > 0, rim, photo)
+        filled = np.where(hole[..., None] > 0, rim, photo)
+        return without_shadow(filled, photographed_shadow(filled, labels))
     inside_px = cv2.distanceTransform(hole, cv2.DIST_L2, 5)  # from the nearest known pixel
     diffused = np.clip(1 - (inside_px - 0.5) / (SEAM_WIDTH * radius), 0, 1)[..., None]
     filled = diffused * rim + (1 - diffused) * texture
-    return np.where(hole[..., None] > 0, filled + 0.5, photo).astype(np.uint8)
+    filled = np.where(hole[..., None] > 0, filled + 0.5, photo).astype(np.uint8)
+    return without_shadow(filled, photographed_shadow(filled, labels))
