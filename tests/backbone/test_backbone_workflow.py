@@ -14,7 +14,7 @@ import yaml
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
 from schemas.video import read_video
 
-from .conftest import write_scene
+from .conftest import tiny_scene_dict, write_scene
 
 REPO = Path(__file__).resolve().parents[2]
 BIN = Path(sys.executable).parent
@@ -178,3 +178,64 @@ def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run
     loss = (out / "report" / "loss.svg").read_text()
     assert "total" in used and all(f">{term}<" in loss for term in used)
     assert loss.count("<polyline") == len(used)
+
+
+def snakemake_command(workdir: Path, *args: str, config: tuple = ()) -> list:
+    return [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2", "--config",
+            f"scenes_dir={workdir / 'scenes'}", f"results_dir={workdir / 'results'}", "device=cpu", *config, *args]
+
+
+def test_the_workflow_has_no_lint_findings(tmp_path):
+    write_scene(tmp_path / "scenes" / "tiny")
+    proc = subprocess.run(snakemake_command(tmp_path, "--lint"), cwd=tmp_path, env=ENV, capture_output=True, text=True)
+    assert proc.returncode == 0 and "Congratulations" in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+
+
+def test_the_config_is_checked_by_its_schema(tmp_path):
+    write_scene(tmp_path / "scenes" / "tiny")
+    for wrong, named in (("gpu=-1", "gpu"), ("devices=cpu", "devices"), ("device=tpu", "tpu")):
+        proc = subprocess.run(snakemake_command(tmp_path, "-n", config=(wrong,)), cwd=tmp_path, env=ENV,
+                              capture_output=True, text=True)
+        out = proc.stdout + proc.stderr
+        assert proc.returncode != 0 and named in out and "config.schema.yaml" in out, out
+
+
+@pytest.mark.slow
+def test_a_bad_scene_fails_its_own_job_and_the_good_one_runs(tmp_path):
+    """A folder of a good scene and one with friction .inf: the bad one is one failing job whose paragraph names
+    its key, with no traceback; the good one's reconstruction runs (the default profile keeps going)."""
+    write_scene(tmp_path / "scenes" / "good")
+    bad = tiny_scene_dict()
+    bad["physics"]["ground"] = {"friction": float("inf")}
+    write_scene(tmp_path / "scenes" / "bad one", bad)
+    proc = subprocess.run(snakemake_command(tmp_path, "--until", "reconstruct", "refused"), cwd=tmp_path, env=ENV,
+                          capture_output=True, text=True)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert "field 'physics.ground.friction'" in out and "Fix:" in out
+    assert "Traceback" not in out and "InputFunctionException" not in out, out
+    assert (tmp_path / "results" / "good" / "gaussians.h5").exists()
+    assert not (tmp_path / "results" / "bad one" / "refused").exists()
+
+
+@pytest.mark.slow
+def test_after_ctrl_c_the_same_command_reruns_and_completes(tmp_path):
+    """Ctrl-C (SIGINT to the process group, as a terminal sends it) while pm-simulate runs, then the README's
+    command again: it completes, with no IncompleteFilesException to answer with --rerun-incomplete."""
+    scene = tiny_scene_dict()
+    scene["physics"]["duration_s"] = 2.0
+    write_scene(tmp_path / "scenes" / "tiny", scene)
+    command = snakemake_command(tmp_path, "--until", "simulate")
+    proc = subprocess.Popen(command, cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    setup = tmp_path / "results" / "tiny" / "setup.png"
+    deadline = time.time() + 300
+    while not setup.exists() and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.2)
+    assert proc.poll() is None, "the workflow should still be simulating"
+    os.killpg(proc.pid, signal.SIGINT)
+    proc.wait(timeout=120)
+    assert not (tmp_path / "results" / "tiny" / "trajectories.h5").exists()
+    rerun = subprocess.run(command, cwd=tmp_path, env=ENV, capture_output=True, text=True)
+    assert rerun.returncode == 0, rerun.stdout[-2000:] + rerun.stderr[-2000:]
+    assert "Incomplete" not in rerun.stderr and setup.exists()

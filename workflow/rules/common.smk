@@ -11,8 +11,25 @@ from snakemake.utils import validate
 
 from schemas import InputError, config_hash, load_scene, stage_keys
 
+def config_paragraph(err):
+    """One paragraph for a --config that its schema refuses (snakemake's WorkflowError around jsonschema's)."""
+    cause = err.__context__  # jsonschema's ValidationError, raised while snakemake handled it
+    if not hasattr(cause, "schema"):
+        return str(err)
+    if not cause.path:  # a key the schema does not know
+        return (f"error in --config (workflow/config.schema.yaml): {cause.message}. "
+                f"Fix: use only the keys {', '.join(cause.schema.get('properties', {}))}.")
+    key = ".".join(map(str, cause.path))
+    described = cause.schema.get("description", "").strip()
+    return (f"error in --config (workflow/config.schema.yaml), key '{key}': {cause.message}. "
+            f"Fix: give {key} a value the schema allows" + (f" ({described})" if described else "") + ".")
+
+
 # The keys of --config, checked and given their defaults by the schema (workflow/config.schema.yaml).
-validate(config, "../config.schema.yaml")
+try:
+    validate(config, "../config.schema.yaml")
+except WorkflowError as err:
+    raise WorkflowError(config_paragraph(err)) from None
 
 envvars:
     "PATH",
