@@ -16,8 +16,9 @@ $(INSTALLED): pyproject.toml
 demo: $(INSTALLED)
 	$(BIN)/snakemake --cores 2
 
+# One pytest-xdist worker per core; tests/conftest.py keeps each module that shares a fixture on one.
 test: $(INSTALLED) browser
-	$(BIN)/pytest
+	$(BIN)/pytest -n auto
 
 # Debian's chromium and chromedriver for pm-setup's browser test (tests/setup), installed with apt when
 # missing and this is root on Debian; elsewhere that test is skipped and says why.
