@@ -17,8 +17,9 @@ demo: $(INSTALLED)
 	$(BIN)/snakemake --cores 2
 
 # One pytest-xdist worker per core; tests/conftest.py keeps each module that shares a fixture on one.
+# PYTEST_ARGS adds options (benchmarks/test_suite.py: a JUnit report).
 test: $(INSTALLED) browser
-	$(BIN)/pytest -n auto
+	$(BIN)/pytest -n auto $(PYTEST_ARGS)
 
 # Debian's chromium and chromedriver for pm-setup's browser test (tests/setup), installed with apt when
 # missing and this is root on Debian; elsewhere that test is skipped and says why.
