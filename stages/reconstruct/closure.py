@@ -28,6 +28,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .depth import ObjectDepth, aligned_front, medial_balls
 from .geometry import pixel_rays
+from .standing import NEAR_PX, StandingSolid, standing_solid
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -212,11 +213,13 @@ def ray_union(rays: np.ndarray, centres: np.ndarray, radii: np.ndarray, own: np.
     return t_in, t_out
 
 
-def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float) -> tuple[np.ndarray, np.ndarray]:
+def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float,
+                through: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
     """Front and back camera z (N,) m along the rays of the pixels of `mask` (H,W) bool (row-major), of the
     body swept by the medial balls of the silhouette as seen facing the object (gravity along `down` (3,)
     in the camera frame), their centres on the vertical plane across the view at the distance that makes
-    the body's largest extent (its balls' along their axis) size_m.
+    the body's largest extent (its balls' along their axis) size_m, or through the camera-frame point
+    `through` (3,) m (a handle, where it meets its standing solid).
 
     A ball whose centre lies at distance D subtends R_px of the facing view when its radius is
     D R_px / sqrt(f^2 + R_px^2): its silhouette is the cone of rays tangent to it, so every ray of the
@@ -241,12 +244,41 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
         r_px = radius[rows, cols]
         return centres, np.linalg.norm(centres, axis=1) * r_px / np.hypot(focal, r_px)
 
-    scale = size_m / unit_extent * (view.R[2] @ towards)  # the plane at the distance that gives size_m
+    if through is None:  # the plane at the distance that gives size_m
+        scale = size_m / unit_extent * (view.R[2] @ towards)
+    else:
+        scale = float(through @ towards)
     axis_points, own = np.unique(np.stack([axis_r, axis_c], axis=-1)[view.mask], axis=0, return_inverse=True)
     centres, radii = balls(*axis_points.T)
     facing = np.zeros(view.mask.shape, int)
     facing[view.mask] = own.ravel()
     return ray_union(input_rays(mask, K), scale * centres, scale * radii, facing[view.pixels_of(mask)])
+
+
+def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float,
+                 solid: StandingSolid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Front and back camera z (N,) m along the rays of the pixels of `mask` (H,W) bool (row-major) of the
+    standing solid (standing.standing_solid) whose largest extent is size_m, and (N,) bool: those whose
+    front lies on its base. A pixel whose ray grazes by it (within standing.NEAR_PX of its image) lies on
+    the surface of the nearest pixel it holds, with no thickness; the rest (a handle) keep their own medial
+    balls, on the vertical plane through the solid's middle where they meet it."""
+    scale = size_m / solid.solid.extent
+    t_in, t_out = scale * solid.t_in, scale * solid.t_out
+    held = np.zeros(mask.shape, bool)
+    held[mask] = np.isfinite(t_in)
+    mid = np.full(mask.shape, np.nan)
+    mid[mask] = 0.5 * (t_in + t_out)
+    gap, (rows, cols) = ndimage.distance_transform_edt(~held, return_indices=True)
+    handle = mask & (gap > NEAR_PX)
+    grazed = ~held[mask] & ~handle[mask]
+    t_in[grazed] = t_out[grazed] = mid[rows, cols][mask][grazed]
+    if handle.any():
+        meets = held & (ndimage.distance_transform_edt(~handle) <= NEAR_PX + 2)
+        if not meets.any():
+            meets = held
+        points = input_rays(meets, K) * mid[meets][:, None]
+        t_in[handle[mask]], t_out[handle[mask]] = ball_depths(handle, K, down, size_m, points.mean(0))
+    return t_in, t_out, solid.on_base
 
 
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
@@ -339,13 +371,20 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
     for k, size in enumerate(sizes_m):
         mask = labels == k + 1
         front, back = np.full(mask.shape, np.nan), np.full(mask.shape, np.nan)
-        t_in, t_out = ball_depths(mask, K, down, size)
+        solid = standing_solid(mask, K, down)
+        if solid is None:
+            t_in, t_out = ball_depths(mask, K, down, size)
+            on_solid_base = np.zeros(len(t_in), bool)
+        else:
+            t_in, t_out, on_solid_base = solid_depths(mask, K, down, size, solid)
+            log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k,
+                     type(solid.solid).__name__, solid.overlap)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
         layer = max(BASE_LAYER * size, 1.5 * float(np.median(t_in)) / K[0, 0])
         front[mask], back[mask], cut = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,
                                                     layer)
         base = np.zeros(mask.shape, bool)
-        base[mask] = (front[mask] != t_in) | (back[mask] != t_out)
+        base[mask] = (front[mask] != t_in) | (back[mask] != t_out) | on_solid_base
         if cut > 0:
             log.info("object %d: cut flat %.1f mm above its lowest point, where it stands on its base", k, 1e3 * cut)
         depth = ObjectDepth(front, back, base)

@@ -1,0 +1,529 @@
+"""Standing solids: a body of revolution about the vertical, or an upright box, where one explains the silhouette.
+
+Things photographed standing are often turned (cups, bottles, tins) or boxed
+(cartons, books). Where such a solid's own image overlaps the silhouette by at
+least FIT_IOU it is taken for the body: a cylinder keeps its flat top and base
+and a box its corners, which the medial balls (closure.ball_depths) round off
+(an upright cylinder came out 0.58-0.69 of its volume, a turned box 0.56-0.70).
+
+Every fit is made in the gravity frame of a view turned to face the object
+(GravityView: x horizontal across, y down along gravity, z horizontal towards
+the silhouette), at an arbitrary scale that closure.object_depths sets from
+size_m and the solid's exact largest extent. The silhouette is read through a
+Gaussian-blurred signed distance of the mask, to a fraction of a pixel.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Optional
+
+import cv2
+import numpy as np
+from scipy import ndimage, optimize
+from scipy.spatial import ConvexHull, QhullError
+
+from .depth import edge_points
+
+FIT_IOU = 0.95
+"""A solid is the body where its image overlaps the silhouette (less a thin handle) by at least this."""
+NEAR_PX = 2.0
+"""Silhouette pixels within this distance of the solid's image belong to the solid (a rim it grazes)."""
+HANDLE_THICKNESS = 0.35
+"""A piece of the silhouette outside the solid's image is a handle, with balls of its own, where its
+thickness is at most this share of the solid's image's; a thicker piece counts against the overlap."""
+STEEPEST_DEG = 60.0
+"""Seen from more than this far above, a solid's height and depth are one unknown: no solid is tried."""
+BLUR_PX = 1.5
+"""Gaussian sigma (pixels) on the signed distance: the staircase of the pixels smoothed to its edge."""
+TRACE_PX = 0.75
+"""A point of an end circle's image within this of the outline traces it..."""
+TRACED_SHARE = 0.4
+"""... and an end circle whose image traces the outline along this share of its points can be a flat face
+(an upright cylinder's end: 0.43-0.65 of its points; a ball's circles, which touch it at a point or two
+and curve away, 0.31-0.47)."""
+END_SEARCH_PX = 6.0
+FACE_PX = 1.5
+FACE_SPAN = 0.3
+"""A flat face's height and radius are refined together, within FACE_PX of the slab it ends on and 4 % of
+the radius a line through the profile over FACE_SPAN of its height gives there."""
+WIDEST_SPAN = 0.15
+"""The widest radius is the top of a parabola fitted to the profile over this share of its height either
+side of its widest slab (the widest single slab is the noisiest: 2-3 % long on an upright cylinder)."""
+"""The face of a flat end is looked for this far inside the last slab seen (which may be one of the
+widest circles that fit beyond it, a pixel or two out)."""
+NARROW_SPAN = 0.1
+NARROW_SHARE = 0.92
+"""An end is flat only where the body does not narrow towards it: its face keeps NARROW_SHARE of the widest
+radius over the NARROW_SPAN of the height seen before it (a ball's circles, 0.8 of its radius above its
+centre, keep 0.76 of it; an upright cylinder's 0.98-1.02)."""
+CIRCLE_POINTS = 72
+SLICES = 240
+"""Horizontal slices of a body of revolution: a quarter of a pixel each on a 60 px body."""
+HIDDEN_PX2 = 1.0
+SUPERSAMPLE = 4
+"""Raster cells per pixel side, for which slice covers which part of the image."""
+BOX_YAWS_DEG = (0.0, 20.0, 40.0, 60.0, 80.0)
+"""The box's fit starts from these turns (a box turned by 90 degrees is the same box)."""
+ROUND_FIRST = 0.01
+"""A box is taken over a body of revolution only where its image overlaps by this much more: seen level,
+an upright cylinder's silhouette is a box's."""
+
+
+@dataclass
+class GravityView:
+    """A camera turned about the vertical to face the silhouette. R (3,3): rows the gravity frame's axes in the
+    camera frame (x across, y down, z horizontal towards the silhouette's centroid); K (3,3) the input's
+    intrinsics; mask (H,W) bool; sdf (H,W) px: blurred signed distance to the outline, positive inside."""
+
+    R: np.ndarray
+    K: np.ndarray
+    mask: np.ndarray
+    sdf: np.ndarray
+
+    @staticmethod
+    def of(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> "GravityView":
+        """The view of silhouette `mask` (H,W) bool under K (3,3), gravity along `down` (3,) in the camera frame."""
+        rows, cols = np.nonzero(mask)
+        towards = np.linalg.inv(K) @ np.array([cols.mean() + 0.5, rows.mean() + 0.5, 1.0])
+        across = np.cross(down, towards)
+        across /= np.linalg.norm(across)
+        forward = np.cross(across, down)
+        # the outline lies midway between the inside and the outside pixel centres on either side of it
+        signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+        signed = np.where(mask, signed - 0.5, signed + 0.5)
+        return GravityView(np.stack([across, down, forward]), K, mask, ndimage.gaussian_filter(signed, BLUR_PX))
+
+    def elevation_deg(self) -> float:
+        """How far above the horizontal the camera sees the silhouette's centroid, degrees."""
+        rows, cols = np.nonzero(self.mask)
+        ray = np.linalg.inv(self.K) @ np.array([cols.mean() + 0.5, rows.mean() + 0.5, 1.0])
+        return math.degrees(math.asin(float(ray @ self.R[1]) / float(np.linalg.norm(ray))))
+
+    def project(self, points: np.ndarray) -> np.ndarray:
+        """Image coordinates (...,2) (u, v; pixel centres at +0.5) of points (...,3) in the gravity frame."""
+        camera = points @ self.R
+        return camera[..., :2] / camera[..., 2:3] * np.diag(self.K)[:2] + self.K[:2, 2]
+
+    def sdf_at(self, points: np.ndarray) -> np.ndarray:
+        """Blurred signed distance (...) px of the images of points (...,3), bilinear; behind the camera -inf."""
+        uv = self.project(points)
+        values = ndimage.map_coordinates(self.sdf, [uv[..., 1].ravel() - 0.5, uv[..., 0].ravel() - 0.5],
+                                         order=1, mode="nearest").reshape(uv.shape[:-1])
+        return np.where(points @ self.R[:, 2] > 0, values, -np.inf)
+
+    def rays(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """(N,3) gravity-frame rays through pixel centres, scaled to camera z = 1 (so t is the camera z)."""
+        rays = np.stack([cols + 0.5, rows + 0.5, np.ones(len(rows))], axis=1) @ np.linalg.inv(self.K).T
+        return rays @ self.R.T
+
+
+def circles(centres: np.ndarray, radii: np.ndarray, count: int = CIRCLE_POINTS) -> np.ndarray:
+    """Points (S,count,3) on horizontal circles about centres (S,3) of radii (S,)."""
+    angle = 2 * math.pi * np.arange(count) / count
+    ring = np.stack([np.cos(angle), np.zeros(count), np.sin(angle)], axis=1)
+    return centres[:, None, :] + radii[:, None, None] * ring
+
+
+@dataclass
+class Revolution:
+    """A body of revolution about the vertical line x = axis_x, z = 1 of the gravity frame: slabs between
+    heights edges (S+1,) (y, downwards) of radii (S,)."""
+
+    axis_x: float
+    edges: np.ndarray
+    radii: np.ndarray
+
+    @property
+    def extent(self) -> float:
+        """Largest extent: the larger of its widest diameter (WIDEST_SPAN) and its height."""
+        heights = 0.5 * (self.edges[:-1] + self.edges[1:])
+        widest = int(np.argmax(ndimage.uniform_filter1d(self.radii, 9)))
+        near = np.abs(heights - heights[widest]) <= WIDEST_SPAN * abs(self.edges[-1] - self.edges[0])
+        fit = np.polyfit(heights[near], self.radii[near], 2)
+        top = -fit[1] / (2 * fit[0]) if fit[0] < 0 else heights[widest]
+        radius = float(np.polyval(fit, np.clip(top, heights[near].min(), heights[near].max())))
+        return max(2 * radius, float(self.edges[-1] - self.edges[0]))
+
+    def intersect(self, rays: np.ndarray, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
+        """(t_in, t_out) (N,) where rays t * rays (N,3) enter and leave it; NaN where they miss."""
+        t_in, t_out = np.full(len(rays), np.nan), np.full(len(rays), np.nan)
+        for start in range(0, len(rays), chunk):
+            d = rays[start:start + chunk]
+            a = (d[:, 0] ** 2 + d[:, 2] ** 2)[:, None]
+            b = (-2 * (d[:, 0] * self.axis_x + d[:, 2]))[:, None]
+            disc = b * b - 4 * a * (self.axis_x ** 2 + 1 - self.radii ** 2)[None, :]
+            root = np.sqrt(np.maximum(disc, 0.0))
+            near, far = (-b - root) / (2 * a), (-b + root) / (2 * a)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                low, high = self.edges[None, :-1] / d[:, 1:2], self.edges[None, 1:] / d[:, 1:2]
+            level = d[:, 1:2] == 0
+            y_in = np.where(level, -np.inf, np.minimum(low, high))
+            y_out = np.where(level, np.inf, np.maximum(low, high))
+            enter, leave = np.maximum(near, y_in), np.minimum(far, y_out)
+            hit = (disc > 0) & (enter < leave)
+            entry, exit_ = np.where(hit, enter, np.inf).min(1), np.where(hit, leave, -np.inf).max(1)
+            met = np.isfinite(entry)
+            t_in[start:start + chunk] = np.where(met, entry, np.nan)
+            t_out[start:start + chunk] = np.where(met, exit_, np.nan)
+        return t_in, t_out
+
+    def base_height(self) -> float:
+        return float(self.edges[-1])
+
+
+def widest_radii(view: GravityView, axis_x: float, heights: np.ndarray, iterations: int = 22) -> np.ndarray:
+    """For each height (S,) the radius of the widest horizontal circle about the axis whose image lies inside
+    the silhouette (bisection; 0 where its centre's image lies outside)."""
+    centres = np.stack([np.full(len(heights), axis_x), heights, np.ones(len(heights))], axis=1)
+    rows, cols = np.nonzero(view.mask)
+    low, high = np.zeros(len(heights)), np.full(len(heights), (np.ptp(cols) + 2) / view.K[0, 0])
+    for _ in range(iterations):
+        middle = 0.5 * (low + high)
+        fits = view.sdf_at(circles(centres, middle)).min(1) >= 0
+        low, high = np.where(fits, middle, low), np.where(fits, high, middle)
+    return np.where(view.sdf_at(centres) >= 0, low, 0.0)
+
+
+def axis_span(view: GravityView, axis_x: float) -> Optional[tuple[float, float]]:
+    """The heights (top, bottom) between which the axis's image lies inside the silhouette (its longest run,
+    ends by bisection), None if nowhere."""
+    rows, _ = np.nonzero(view.mask)
+    focal = view.K[1, 1]
+    # the silhouette's rows as heights on the plane z = 1, with a margin
+    rays = view.rays(np.array([rows.min() - 2, rows.max() + 2]), np.full(2, view.K[0, 2]))
+    y0, y1 = sorted(rays[:, 1] / rays[:, 2])
+    margin = 0.5 * (y1 - y0)
+    heights = np.arange(y0 - margin, y1 + margin, 0.25 / focal)
+    inside = view.sdf_at(np.stack([np.full(len(heights), axis_x), heights, np.ones(len(heights))], 1)) > 0
+    if not inside.any():
+        return None
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], inside.astype(int), [0]])))
+    starts, ends = edges[::2], edges[1::2]
+    k = int(np.argmax(ends - starts))
+    first, last = starts[k], ends[k] - 1
+
+    def crossing(inner: float, outer: float) -> float:
+        for _ in range(30):
+            middle = 0.5 * (inner + outer)
+            point = np.array([[axis_x, middle, 1.0]])
+            inner, outer = (middle, outer) if view.sdf_at(point)[0] > 0 else (inner, middle)
+        return 0.5 * (inner + outer)
+
+    return (crossing(heights[first], heights[max(first - 1, 0)]),
+            crossing(heights[last], heights[min(last + 1, len(heights) - 1)]))
+
+
+def covering_slices(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """For each raster cell (SUPERSAMPLE per pixel) covered by the images of the slabs (heights edges (S+1,),
+    radii (S,) about the axis), the highest-index and the lowest-index slab covering it: (kmax, kmin) (N,)."""
+    height, width = view.mask.shape
+    last = np.full((height * SUPERSAMPLE, width * SUPERSAMPLE), -1, np.int32)
+    first = last.copy()
+    polygons = []
+    for k in range(len(radii)):
+        ends = np.array([[axis_x, edges[k], 1.0], [axis_x, edges[k + 1], 1.0]])
+        points = view.project(circles(ends, np.full(2, radii[k]))).reshape(-1, 2)
+        polygons.append(cv2.convexHull(np.round(points * SUPERSAMPLE * 16).astype(np.int32)) if radii[k] > 0 else None)
+    for order, image in ((range(len(radii)), last), (reversed(range(len(radii))), first)):
+        for k in order:
+            if polygons[k] is not None:
+                cv2.fillConvexPoly(image, polygons[k], int(k), shift=4)
+    covered = last >= 0
+    return last[covered], first[covered]
+
+
+def traced_share(view: GravityView, centre: np.ndarray, radius: float) -> float:
+    """The share of the image of the horizontal circle (centre (3,), radius) within TRACE_PX of the outline."""
+    sdf = view.sdf_at(circles(centre[None], np.array([radius])))[0]
+    return float(np.mean(np.abs(sdf) < TRACE_PX))
+
+
+def revolution(view: GravityView) -> Optional[Revolution]:
+    """The body of revolution about the vertical that the silhouette shows: at each height the widest circle
+    whose image fits inside it, about the axis offset whose circles hold the most; None if the axis meets
+    the silhouette nowhere.
+
+    Seen from above (or below), circles beyond an end fit inside the images of the others (seen_ends): the
+    widest that fit there are no evidence. Where the last circle seen traces the outline (a rim) and the
+    body does not narrow towards it, the end is flat there (flat_end); else (a ball) it is a dome
+    continuing the slices before it (dome_end)."""
+    focal = view.K[0, 0]
+    _, cols = np.nonzero(view.mask)
+    half_width = 0.5 * np.ptp(cols) / focal
+
+    def profile(axis_x: float, slices: int = SLICES // 3) -> tuple[np.ndarray, np.ndarray]:
+        span = axis_span(view, axis_x)
+        if span is None:
+            return np.zeros(1), np.zeros(1)
+        edges = np.linspace(span[0], span[1], slices + 1)
+        return edges, widest_radii(view, axis_x, 0.5 * (edges[:-1] + edges[1:]))
+
+    def held(axis_x: float) -> float:
+        edges, radii = profile(axis_x)
+        return float(np.sum(radii ** 2 * np.diff(edges)))
+
+    offsets = np.linspace(-0.25, 0.25, 11) * half_width
+    best = offsets[int(np.argmax([held(x) for x in offsets]))]
+    step = offsets[1] - offsets[0]
+    fine = best + np.linspace(-step, step, 9)
+    axis_x = float(fine[int(np.argmax([held(x) for x in fine]))])
+    edges, radii = profile(axis_x, SLICES)
+    if radii.max() <= 0:
+        return None
+    top, bottom = seen_ends(view, axis_x, edges, radii)
+    heights = 0.5 * (edges[:-1] + edges[1:])
+    rows, _ = np.nonzero(view.mask)
+    pixel = abs(edges[-1] - edges[0]) / max(np.ptp(rows), 1)  # about a pixel of height
+    span = int(math.ceil(NARROW_SPAN * (bottom - top)))
+    ends = []
+    for end, outward in ((top, -1), (bottom, 1)):
+        # the face, if any: near the end seen, a circle that traces the outline where the body does not narrow
+        inward = outward * (heights[end] - heights)
+        near = np.flatnonzero((inward >= -pixel) & (inward <= END_SEARCH_PX * pixel) & (radii > 0))
+        widest_before = np.array([radii[k - outward * np.arange(span + 1)].max() if 0 <= k - outward * span < len(radii)
+                                  else np.inf for k in near])
+        near = near[radii[near] >= NARROW_SHARE * widest_before]
+        shares = [traced_share(view, np.array([axis_x, heights[k], 1.0]), radii[k]) for k in near]
+        if shares and max(shares) >= TRACED_SHARE:
+            ends.append(flat_end(view, axis_x, edges, radii, int(near[int(np.argmax(shares))]), outward, pixel))
+        else:
+            ends.append(dome_end(edges, radii, end, outward))
+    (top_y, top_dome), (bottom_y, bottom_dome) = ends
+    edges = np.linspace(top_y, bottom_y, SLICES + 1)
+    heights = 0.5 * (edges[:-1] + edges[1:])
+    radii = widest_radii(view, axis_x, heights)
+    for dome in (top_dome, bottom_dome):
+        if dome is not None:
+            (start, stop), centre, rho = dome
+            beyond = (heights > min(start, stop)) & (heights < max(start, stop))
+            radii[beyond] = np.minimum(radii[beyond], np.sqrt(np.maximum(rho ** 2 - (heights[beyond] - centre) ** 2, 0)))
+    return Revolution(axis_x, edges, radii)
+
+
+def seen_ends(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray) -> tuple[int, int]:
+    """The first and last slab (indices) whose images are not hidden inside the others': seen from above (or
+    below), circles beyond an end face fit inside its image. An end may uncover HIDDEN_PX2 of the image
+    (the raster's own steps)."""
+    kmax, kmin = covering_slices(view, axis_x, edges, radii)
+    spare = int(HIDDEN_PX2 * SUPERSAMPLE ** 2)
+    top = int(np.sort(kmax)[min(spare, len(kmax) - 1)])
+    bottom = int(np.sort(kmin)[max(len(kmin) - 1 - spare, 0)])
+    return top, bottom
+
+
+def flat_end(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray, end: int, outward: int,
+             pixel: float) -> tuple[float, None]:
+    """A flat end near slab `end` (outward -1 up, +1 down): past it as long as the body does not narrow (by a
+    quarter of a pixel), then to the height where the half of the face's circle that faces the outline lies
+    on it best (FACE_PX; least squares of the signed distance, the radius fitted with it: one slab's
+    radius is a fifth of a pixel off, and the face's height with it). Returns the face's height, no dome."""
+    focal = view.K[0, 0]
+    k = end
+    while 0 <= k + outward < len(radii) and radii[k + outward] >= radii[end] - 0.25 / focal:
+        k += outward
+    face = float(edges[k + (outward > 0)])
+    heights = face + np.linspace(-FACE_PX, FACE_PX, 61) * pixel
+    # the radius near the face: a line through the profile over FACE_SPAN of the height before it
+    middle = 0.5 * (edges[:-1] + edges[1:])
+    before = (outward * (face - middle) >= 0) & (outward * (face - middle) <= FACE_SPAN * abs(edges[-1] - edges[0]))
+    radius = float(np.polyval(np.polyfit(middle[before], radii[before], 1), face))
+    sizes = radius * (1 + np.linspace(-0.04, 0.04, 17))
+    centres = np.stack([np.full(len(heights), axis_x), heights, np.ones(len(heights))], axis=1)
+    points = circles(np.repeat(centres, len(sizes), axis=0), np.tile(sizes, len(heights)))
+    v = view.project(points)[..., 1] - view.project(np.repeat(centres, len(sizes), axis=0))[:, None, 1]
+    facing = outward * v > 0  # the half beyond the centre's image, towards the end
+    misfit = np.sum(np.where(facing, view.sdf_at(points), 0.0) ** 2, axis=1) / np.maximum(facing.sum(1), 1)
+    return float(heights[int(np.argmin(misfit)) // len(sizes)]), None
+
+
+def dome_end(edges: np.ndarray, radii: np.ndarray, end: int, outward: int):
+    """A round end: the sphere about the axis fitted (least squares, r^2 + (y - c)^2 = rho^2) to the profile
+    over the quarter of its height before the last slice seen, continued beyond it. Returns the tip's height
+    and ((from, to) heights, centre height, rho) of the dome; a hemisphere of the last radius where the
+    profile widens towards its end."""
+    heights = 0.5 * (edges[:-1] + edges[1:])
+    tall = abs(edges[-1] - edges[0])
+    near = (np.abs(heights - heights[end]) <= 0.25 * tall) & (np.sign(heights - heights[end]) != outward) \
+        & (radii > 0)
+    y, r = heights[near], radii[near]
+    centre, rho = heights[end], radii[end]
+    if len(y) >= 5:
+        (c2, const), *_ = np.linalg.lstsq(np.stack([2 * y, np.ones(len(y))], 1), r ** 2 + y ** 2, rcond=None)
+        if const + c2 ** 2 > radii[end] ** 2 and (c2 - heights[end]) * outward <= 0:
+            centre, rho = float(c2), float(math.sqrt(const + c2 ** 2))
+    tip = centre + outward * rho
+    return tip, ((heights[end], tip), centre, rho)
+
+
+@dataclass
+class UprightBox:
+    """A box standing on the ground y = 1 of the gravity frame: base centre (x, 1, z), yaw (radians) about the
+    vertical, width (along its turned x), depth (along its turned z), height."""
+
+    x: float
+    z: float
+    yaw: float
+    width: float
+    depth: float
+    height: float
+
+    @property
+    def extent(self) -> float:
+        return max(self.width, self.depth, self.height)
+
+    def axes(self) -> np.ndarray:
+        """(3,3) rows: its own x, y (down), z in the gravity frame."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+    def centre(self) -> np.ndarray:
+        return np.array([self.x, 1.0 - self.height / 2, self.z])
+
+    def half(self) -> np.ndarray:
+        return 0.5 * np.array([self.width, self.height, self.depth])
+
+    def corners(self) -> np.ndarray:
+        signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+        return self.centre() + (signs * self.half()) @ self.axes()
+
+    def intersect(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(t_in, t_out) (N,) where rays t * rays (N,3) enter and leave it (slabs); NaN where they miss."""
+        origin = -self.axes() @ self.centre()
+        d = rays @ self.axes().T
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a, b = (-self.half() - origin) / d, (self.half() - origin) / d
+        a = np.where(d == 0, np.where(np.abs(origin) <= self.half(), -np.inf, np.nan), a)
+        b = np.where(d == 0, np.where(np.abs(origin) <= self.half(), np.inf, np.nan), b)
+        enter, leave = np.minimum(a, b).max(1), np.maximum(a, b).min(1)
+        hit = enter < leave
+        return np.where(hit, enter, np.nan), np.where(hit, leave, np.nan)
+
+    def base_height(self) -> float:
+        return 1.0
+
+
+def hull_of(view: GravityView, box: UprightBox) -> Optional[np.ndarray]:
+    """(M,2) image coordinates of the box's image, counter-clockwise; None if it is not in front of the camera."""
+    corners = box.corners()
+    if np.any(corners @ view.R[:, 2] <= 1e-6):
+        return None
+    uv = view.project(corners)
+    try:
+        return uv[ConvexHull(uv).vertices]
+    except QhullError:
+        return None
+
+
+def outline_distance(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Distance (N,) of points (N,2) from the boundary of a polygon (M,2)."""
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    edge = b - a
+    s = np.clip(np.einsum("nmk,mk->nm", points[:, None, :] - a[None], edge) / np.sum(edge * edge, 1), 0.0, 1.0)
+    nearest = a[None] + s[..., None] * edge[None]
+    return np.linalg.norm(points[:, None, :] - nearest, axis=2).min(1)
+
+
+def upright_box(view: GravityView) -> Optional[UprightBox]:
+    """The box standing on the ground whose image best follows the outline: Nelder-Mead on the mean squared
+    distance of the outline from the image's edge plus that of the image's edge from the outline (the
+    blurred signed distance), from BOX_YAWS_DEG, the rest started from the silhouette's lowest point and
+    its width and height."""
+    outline = edge_points(view.mask)[:, ::-1] + 0.5  # (u, v)
+    rows, cols = np.nonzero(view.mask)
+    focal = view.K[0, 0]
+    low = view.rays(np.array([rows.max()]), np.array([int(np.median(cols[rows == rows.max()]))]))[0]
+    if low[1] <= 0:  # its lowest point does not look down at the ground
+        return None
+    near = low / low[1]  # where that ray meets the ground y = 1
+    size = np.ptp(cols) / focal * near[2] / math.sqrt(2)
+    tall = np.ptp(rows) / focal * near[2] * 0.7
+    samples = np.linspace(0.0, 1.0, 12, endpoint=False)
+
+    def cost(p: np.ndarray) -> float:
+        x, z, yaw, w, d, h = p
+        if min(w, d, h) <= 0:
+            return 1e9
+        polygon = hull_of(view, UprightBox(x, z, yaw, w, d, h))
+        if polygon is None:
+            return 1e9
+        edge = np.roll(polygon, -1, axis=0) - polygon
+        along = polygon[:, None, :] + samples[None, :, None] * edge[:, None, :]
+        lengths = np.repeat(np.linalg.norm(edge, axis=1), len(samples))
+        sdf = ndimage.map_coordinates(view.sdf, [along[..., 1].ravel() - 0.5, along[..., 0].ravel() - 0.5],
+                                      order=1, mode="nearest")
+        return float(np.mean(outline_distance(outline, polygon) ** 2) + np.sum(lengths * sdf ** 2) / lengths.sum())
+
+    best = None
+    for yaw in BOX_YAWS_DEG:
+        start = np.array([near[0], near[2] + size / 2, math.radians(yaw), size, size, tall])
+        simplex = start + np.diag([0.1 * size, 0.1 * size, 0.2, 0.2 * size, 0.2 * size, 0.2 * tall])
+        result = optimize.minimize(cost, start, method="Nelder-Mead",
+                                   options={"initial_simplex": np.vstack([start, simplex]), "xatol": 1e-5,
+                                            "fatol": 1e-6, "maxfev": 1500})
+        if best is None or result.fun < best.fun:
+            best = result
+    return UprightBox(*best.x)
+
+
+@dataclass
+class StandingSolid:
+    """The solid taken for a body, at the scale of its fit: its depths along each silhouette pixel's ray
+    (camera z, NaN where it misses), its image (H,W) bool and the share of the silhouette it explains."""
+
+    solid: Revolution | UprightBox
+    t_in: np.ndarray
+    t_out: np.ndarray
+    on_base: np.ndarray
+    image: np.ndarray
+    overlap: float
+
+
+def image_of(view: GravityView, solid: Revolution | UprightBox) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(image (H,W) bool, t_in, t_out (H,W), NaN off it): the pixels whose centre's ray meets the solid, near
+    the silhouette."""
+    height, width = view.mask.shape
+    rows, cols = np.nonzero(ndimage.binary_dilation(view.mask, iterations=6))
+    t_in, t_out = solid.intersect(view.rays(rows, cols))
+    front, back = np.full((height, width), np.nan), np.full((height, width), np.nan)
+    front[rows, cols], back[rows, cols] = t_in, t_out
+    return np.isfinite(front), front, back
+
+
+def overlap(view: GravityView, image: np.ndarray) -> float:
+    """IoU of the solid's image (H,W) bool with the silhouette less its handles (HANDLE_THICKNESS)."""
+    mask = view.mask
+    rest = mask & (ndimage.distance_transform_edt(~image) > NEAR_PX)
+    pieces, count = ndimage.label(rest)
+    own = float(ndimage.distance_transform_edt(image).max())
+    handles = np.zeros_like(mask)
+    for k, piece in enumerate(ndimage.find_objects(pieces), start=1):
+        part = pieces[piece] == k
+        if ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max() <= HANDLE_THICKNESS * own:
+            handles[piece] |= part
+    target = mask & ~handles
+    return float(np.sum(image & target) / max(np.sum(image | target), 1))
+
+
+def standing_solid(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> Optional[StandingSolid]:
+    """The standing solid (a body of revolution or an upright box) whose image best overlaps the silhouette
+    `mask` (H,W) bool under K (3,3), gravity along `down` (3,) (camera frame), where it reaches FIT_IOU;
+    None otherwise, and when seen from more than STEEPEST_DEG above."""
+    view = GravityView.of(mask, K, down)
+    if view.elevation_deg() > STEEPEST_DEG:
+        return None
+    found = None
+    for fit in (revolution, upright_box):
+        solid = fit(view)
+        if solid is None:
+            continue
+        image, front, back = image_of(view, solid)
+        share = overlap(view, image)
+        if share >= FIT_IOU and (found is None or share > found.overlap + ROUND_FIRST):
+            rays = view.rays(*np.nonzero(mask))
+            base = solid.base_height()
+            t_in, t_out = front[mask], back[mask]
+            on_base = np.abs(t_in * rays[:, 1] - base) < 1e-7 * max(abs(base), 1.0)
+            found = StandingSolid(solid, t_in, t_out, on_base, image, share)
+    return found
