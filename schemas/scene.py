@@ -66,6 +66,11 @@ class ExtraView(_Strict):
 class ReconstructConfig(_Strict):
     resolution: int = Field(256, ge=32, le=2048, description="longest image side used by the optimisation, pixels")
     iterations: int = Field(600, ge=0, description="optimisation iterations (paper: 3000)")
+    prior: Literal["symmetric", "lgm"] = Field(
+        "symmetric", description="the shape of the unseen half: symmetric continues the photographed front without "
+        "weights; lgm runs multi-view diffusion (ImageDream) and LGM from local weights (pm-reconstruct "
+        "--lgm-model/--multiview-model, else env PHYSMOTION_LGM_MODEL/PHYSMOTION_MULTIVIEW_MODEL, else the Hugging "
+        "Face cache)")
     init_ply: Optional[Path] = Field(None, description="3DGS PLY from another tool as the initial Gaussians")
     extra_views: List[ExtraView] = Field(default_factory=list, description="extra views for the hard-depth loss (Eq. 9)")
     sam_model: Optional[Path] = Field(None, description="folder of a transformers SAM model: boxes are refined by SAM "

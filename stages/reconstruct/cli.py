@@ -26,7 +26,8 @@ Reconstruct the scene's objects as 3D Gaussians from its one photograph.
 Segments each object (mask file, box refined by GrabCut or SAM, image alpha),
 inpaints the background, builds a metric depth prior (silhouette inflation, or
 a DPT/MiDaS model), lifts a closed surface of Gaussians (or places
-reconstruct.init_ply) and optimises it through splat on the input view with
+reconstruct.init_ply, or with reconstruct.prior lgm places the Gaussians LGM
+makes from four ImageDream views) and optimises it through splat on the input view with
 the colour and hard-depth losses (reconstruct.iterations at
 reconstruct.resolution). Writes gaussians.h5 (DESIGN.md, Artifacts).
 """
@@ -42,7 +43,27 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--depth-model", type=Path, default=None,
                         help="folder of a transformers DPT/MiDaS model; replaces the inflation prior's front "
                              "(default: reconstruct.depth_model, else $PHYSMOTION_DEPTH_MODEL)")
+    parser.add_argument("--lgm-model", type=Path, default=None,
+                        help="LGM checkpoint (model_fp16_fixrot.safetensors) or its folder, for reconstruct.prior "
+                             "lgm (default: $PHYSMOTION_LGM_MODEL, else the Hugging Face cache of ashawkey/LGM)")
+    parser.add_argument("--multiview-model", type=Path, default=None,
+                        help="ImageDream folder in diffusers' layout, for reconstruct.prior lgm (default: "
+                             "$PHYSMOTION_MULTIVIEW_MODEL, else the Hugging Face cache of "
+                             "ashawkey/imagedream-ipmv-diffusers)")
     return parser
+
+
+def learned_prior(scene, device: str, args: argparse.Namespace):
+    """The loaded models of reconstruct.prior lgm, None for the symmetric prior; InputError before any work when
+    the weights are missing or the scene also gives an init_ply."""
+    if scene.reconstruct.prior != "lgm":
+        return None
+    if scene.reconstruct.init_ply is not None:
+        raise InputError(scene.file, "reconstruct.prior", "prior lgm makes the initial Gaussians, and "
+                         "reconstruct.init_ply gives them too", "remove one of reconstruct.init_ply and prior: lgm")
+    from .lgm.prior import LearnedPrior
+
+    return LearnedPrior.load(scene.file, device, args.lgm_model, args.multiview_model)
 
 
 def model_folder(flag: Optional[Path], scene_key: Optional[Path], env: str) -> Optional[Path]:
@@ -86,8 +107,9 @@ def reconstruct(args: argparse.Namespace) -> None:
     sources = source_files(scene)
     refuse_overwriting({"--out": args.out}, {"--scene": scene.file, **sources})
     check_writable([args.out])
+    learned = learned_prior(scene, device, args)
     prepared = prepare(scene, device, model_folder(args.sam_model, scene.reconstruct.sam_model, "PHYSMOTION_SAM_MODEL"),
-                       model_folder(args.depth_model, scene.reconstruct.depth_model, "PHYSMOTION_DEPTH_MODEL"))
+                       model_folder(args.depth_model, scene.reconstruct.depth_model, "PHYSMOTION_DEPTH_MODEL"), learned)
     gaussians, loss = optimize_scene(scene, prepared, device)
     check_result(scene, len(prepared.initial), len(gaussians), loss)
     height, width = prepared.labels.shape

@@ -4,7 +4,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional
+from typing import TYPE_CHECKING, Optional
 
 import cv2
 import numpy as np
@@ -22,6 +22,9 @@ from .optimize import Settings, optimize
 from .ply import place_ply
 from .segment import ObjectSpec, SamSegmenter, read_photo, segment_objects
 from .views import extra_view, input_view
+
+if TYPE_CHECKING:  # the learned prior's modules import diffusers, which only prior lgm needs
+    from .lgm.prior import LearnedPrior
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -50,7 +53,7 @@ class Prepared:
     depth_prior: np.ndarray    # f32 (H,W) metres along the ray, NaN off objects
     initial: Gaussians
     seen: np.ndarray           # (G,) bool: the initial Gaussians on surfaces the photograph sees
-    volumes: np.ndarray        # (objects,) m^3 the depth prior encloses; NaN for an init_ply's own shape
+    volumes: np.ndarray        # (objects,) m^3 the depth prior (or prior lgm's Gaussians) encloses; NaN for an init_ply
 
 
 def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -> np.ndarray:
@@ -61,8 +64,9 @@ def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -
 
 
 def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
-            depth_model: Optional[Path] = None) -> Prepared:
-    """Segment, inpaint, estimate depth and lift the initial Gaussians of ``scene``."""
+            depth_model: Optional[Path] = None, learned: Optional["LearnedPrior"] = None) -> Prepared:
+    """Segment, inpaint, estimate depth and lift the initial Gaussians of ``scene``; with reconstruct.prior lgm
+    the initial Gaussians and the volumes are ``learned``'s (lgm/prior.py)."""
     photo, alpha = read_photo(scene.image)
     full_height, full_width = photo.shape[:2]
     size = working_size(full_width, full_height, MAX_PHOTO_PX)
@@ -98,11 +102,17 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
             raise InputError(scene.file, f"objects[{k}].size_m", f"an object of {scene.objects[k].size_m:g} m "
                              f"covering its pixels stands {np.nanmin(d.front):.3g} m from the camera, nearer than the "
                              f"renderer sees ({NEAR_PLANE_M:g} m)", "give the object's real size in metres")
-    initial, seen = initial_gaussians(scene, photo, labels, depths, K)
-    volumes = np.array([np.nan if scene.reconstruct.init_ply is not None else d.volume(K) for d in depths])
-    for k, volume in enumerate(volumes):
-        if np.isfinite(volume):
-            log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
+    if scene.reconstruct.prior == "lgm":
+        from .lgm.prior import learned_objects
+
+        initial, seen, volumes = learned_objects(learned, photo, labels, [d.front for d in depths], K,
+                                                 [o.size_m for o in scene.objects], MAX_GAUSSIANS)
+    else:
+        initial, seen = initial_gaussians(scene, photo, labels, depths, K)
+        volumes = np.array([np.nan if scene.reconstruct.init_ply is not None else d.volume(K) for d in depths])
+        for k, volume in enumerate(volumes):
+            if np.isfinite(volume):
+                log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
     return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, seen,
                     volumes)
 

@@ -26,7 +26,7 @@ from .lift import Gaussians
 OPENGL_TO_CAMERA = Rotation.from_euler("x", 180, degrees=True)
 
 
-def _distance_for_extent(means: np.ndarray, focal: float, extent_px: float) -> float:
+def distance_for_extent(means: np.ndarray, focal: float, extent_px: float) -> float:
     """Camera-space depth (m) of the centre of ``means`` (N,3, centred) on the optical axis at which
     their projection is ``extent_px`` wide or high (the larger), ``focal`` in px."""
     def excess(distance: float) -> float:
@@ -50,7 +50,7 @@ def place_ply(path: Path, mask: np.ndarray, K: np.ndarray, size_m: float, object
     means = (means - (low + high) / 2) * scale
     rows, cols = np.nonzero(mask)
     extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
-    distance = _distance_for_extent(means, K[1, 1], extent_px)
+    distance = distance_for_extent(means, K[1, 1], extent_px)
     centre_px = np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
     centre = np.linalg.inv(K) @ centre_px * distance  # on that ray, at camera-space depth `distance`
     count = len(means)

@@ -1,0 +1,119 @@
+"""LGM's Gaussians placed into the input camera, which of them the photograph sees, and the volume they enclose.
+
+Placement (the paper's Sec. 3.3 start): the object frame is OpenGL's with view 0
+facing the photograph, so the cloud turns 180 degrees about x into the camera's
+axes (``ply.OPENGL_TO_CAMERA``); it is scaled so that its largest extent (of the
+1st-99th percentile box of its means, robust to LGM's floaters) is size_m, and
+centred on the ray through the mask's bounding-box centre at the distance
+where it projects as large as the mask (``ply.distance_for_extent``). The depth
+prior then sets the distance: the cloud moves along that ray by the median gap
+between the prior's front and the nearest Gaussian in each mask pixel. Last,
+the mask carves: Gaussians whose centres project outside the (slightly grown)
+mask contradict the photograph and are dropped.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy import ndimage
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from ..lift import Gaussians
+from ..ply import OPENGL_TO_CAMERA, distance_for_extent
+from .splatter import SplatterGaussians
+
+ROBUST_PERCENTILES = (1.0, 99.0)
+CARVE_MARGIN = 0.02
+"""The mask grows by this share of its larger bounding-box side (at least one pixel) before carving."""
+FRONT_LAYER = 0.03
+"""A Gaussian within this share of size_m behind the nearest one in its pixel counts as seen."""
+VOLUME_CELLS = 48
+"""Cells along the largest extent of the occupancy grid that measures the enclosed volume, at most."""
+NEIGHBOURS = 3
+ENCLOSING_WALLS = 5
+"""A cell is inside when the surface lies beyond it in this many of the six axis directions: one gap in the
+sampled surface (LGM leaves some where no view looks straight at it) does not let the cells in line with it out,
+at the price of counting an open cavity (a cup's) as solid."""
+
+
+def project(means: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel columns and rows (N,) int of camera-space points (N,3), by the pixel they fall in."""
+    uv = means @ K.T
+    uv = uv[:, :2] / uv[:, 2:3]
+    return np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+
+
+def nearest_depth(means: np.ndarray, K: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The z-buffer (H,W) of the points (inf where none falls) and each point's pixel index (N,), -1 off the image."""
+    height, width = shape
+    cols, rows = project(means, K)
+    inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & (means[:, 2] > 0)
+    index = np.where(inside, rows * width + cols, -1)
+    zbuffer = np.full(height * width, np.inf)
+    np.minimum.at(zbuffer, index[inside], means[inside, 2])
+    return zbuffer.reshape(shape), index
+
+
+def place(cloud: SplatterGaussians, mask: np.ndarray, K: np.ndarray, size_m: float, front: np.ndarray,
+          object_id: int = 0) -> Gaussians:
+    """LGM's ``cloud`` in the camera ``K`` (3,3) on the object ``mask`` (H,W bool), size_m metres across, its
+    front at the prior's camera-space depths ``front`` (H,W, NaN off the object)."""
+    means = OPENGL_TO_CAMERA.apply(cloud.means)
+    rotations = (OPENGL_TO_CAMERA * Rotation.from_quat(cloud.rotations, scalar_first=True)).as_quat(scalar_first=True)
+    low, high = np.percentile(means, ROBUST_PERCENTILES, axis=0)
+    scale = size_m / float((high - low).max())
+    means = (means - (low + high) / 2) * scale
+    core = np.all((means >= (low - (low + high) / 2) * scale) & (means <= (high - (low + high) / 2) * scale), axis=1)
+    rows, cols = np.nonzero(mask)
+    extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
+    distance = distance_for_extent(means[core], K[1, 1], extent_px)
+    ray = np.linalg.inv(K) @ np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
+    means = means + ray * distance  # ray has z = 1: the centre at camera-space depth `distance`
+    zbuffer, _ = nearest_depth(means, K, mask.shape)
+    gap = (front - zbuffer)[mask & np.isfinite(front) & np.isfinite(zbuffer)]
+    if gap.size:
+        means = means + ray * float(np.median(gap))
+    margin = max(1, round(CARVE_MARGIN * extent_px))
+    grown = ndimage.binary_dilation(mask, iterations=margin)
+    _, index = nearest_depth(means, K, mask.shape)
+    keep = (index >= 0) & grown.reshape(-1)[np.maximum(index, 0)]
+    return Gaussians(means[keep], cloud.scales[keep] * scale, rotations[keep], cloud.opacities[keep],
+                     cloud.colors[keep], np.full(int(keep.sum()), object_id))
+
+
+def seen_from_camera(gaussians: Gaussians, K: np.ndarray, shape: tuple[int, int], size_m: float) -> np.ndarray:
+    """(G,) bool: the Gaussians within FRONT_LAYER size_m of the nearest one in their pixel of the camera ``K``."""
+    zbuffer, index = nearest_depth(gaussians.means, K, shape)
+    nearest = np.where(index >= 0, zbuffer.reshape(-1)[np.maximum(index, 0)], np.inf)
+    return gaussians.means[:, 2] <= nearest + FRONT_LAYER * size_m
+
+
+def enclosed_volume(means: np.ndarray, cells: int = VOLUME_CELLS) -> float:
+    """m^3 inside the surface the points (N,3) sample, on a grid of ``cells`` along their largest extent, or
+    coarser where the points are sparser (cells as large as the median distance to a point's NEIGHBOURS-th
+    nearest neighbour, so that the cells holding points make a closed sheet).
+
+    Cells holding a point (closed over one-cell gaps) are the surface; a cell is inside when the surface lies
+    beyond it in ENCLOSING_WALLS of the six axis directions. The outermost layer of cells counts half (the
+    surface runs through it)."""
+    low, high = means.min(0), means.max(0)
+    spacing = float(np.median(cKDTree(means).query(means, k=NEIGHBOURS + 1)[0][:, -1]))
+    cell = max(float((high - low).max()) / cells, spacing)
+    index = np.floor((means - low) / cell).astype(int) + 2  # a margin of empty cells around the body
+    surface = np.zeros(index.max(0) + 3, bool)
+    surface[tuple(index.T)] = True
+    surface = ndimage.binary_closing(surface, iterations=1)
+    sheet = ndimage.binary_dilation(surface, iterations=1)  # plugs pinholes for the rays below
+    walls = np.zeros(surface.shape, np.int8)  # in how many of the six axis directions the surface lies
+    for axis in range(3):
+        for ordered in (sheet, np.flip(sheet, axis)):
+            beyond = np.zeros_like(ordered)  # a sheet cell strictly before this one along the axis
+            inner = [slice(None)] * 3
+            inner[axis] = slice(1, None)
+            outer = [slice(None)] * 3
+            outer[axis] = slice(None, -1)
+            beyond[tuple(inner)] = np.maximum.accumulate(ordered, axis=axis)[tuple(outer)]
+            walls += beyond if ordered is sheet else np.flip(beyond, axis)
+    solid = surface | (walls >= ENCLOSING_WALLS)
+    outer = solid & ~ndimage.binary_erosion(solid)
+    return (float(solid.sum()) - 0.5 * float(outer.sum())) * cell ** 3

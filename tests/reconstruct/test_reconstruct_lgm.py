@@ -1,0 +1,250 @@
+"""reconstruct.prior lgm: LGM and ImageDream at their published architectures, tiny random ones through the real
+loading code, Pluecker rays against float64, splatter pixels on their rays, placement against a ray-cast sphere."""
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+import yaml
+from safetensors.torch import load_file, save_file
+
+import splat
+from schemas import InputError
+from schemas.artifacts import GaussiansArtifact, read_artifact
+from stages.reconstruct.cli import main
+from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
+from stages.reconstruct.lgm import prior as prior_module
+from stages.reconstruct.lgm.loading import (PUBLISHED_MULTIVIEW_UNET, find_lgm, find_multiview, load_lgm,
+                                            load_multiview, meta_shapes)
+from stages.reconstruct.lgm.multiview import MultiViewUNetModel, sample_views
+from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place
+from stages.reconstruct.lgm.rays import AZIMUTHS_DEG, CAMERA_RADIUS, FOVY_DEG, plucker_embedding, view_poses
+from stages.reconstruct.lgm.splatter import decode, prune
+from stages.reconstruct.lgm.unet import LGM, LGMConfig
+from testing.photographs import Capsule, write_scene
+from testing.tiny_lgm import TINY_LGM, save_tiny_lgm, save_tiny_multiview
+
+PUBLISHED = Path(__file__).parent / "lgm_published"
+
+
+def published_shapes(name: str) -> dict:
+    lines = [line.split() for line in (PUBLISHED / name).read_text().splitlines() if not line.startswith("#")]
+    return {key: tuple(int(n) for n in shape.split("x")) for key, shape in lines}
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("lgm_models")
+    return save_tiny_lgm(folder / "lgm"), save_tiny_multiview(folder / "imagedream")
+
+
+@pytest.fixture(autouse=True)
+def empty_hub_cache(tmp_path, monkeypatch):
+    """No model from this machine's Hugging Face cache or environment leaks into a test."""
+    monkeypatch.setenv("HF_HUB_CACHE", str(tmp_path / "hub"))
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    monkeypatch.delenv("PHYSMOTION_LGM_MODEL", raising=False)
+    monkeypatch.delenv("PHYSMOTION_MULTIVIEW_MODEL", raising=False)
+
+
+def test_published_architectures_have_the_checkpoints_names_and_shapes():
+    lgm = meta_shapes(LGM)
+    assert lgm == published_shapes("lgm_big_keys.txt")
+    assert 414e6 < sum(math.prod(s) for s in lgm.values()) < 416e6  # LGM's 415 M parameters
+    assert LGMConfig().splat_size == 128
+    unet = meta_shapes(lambda: MultiViewUNetModel(**PUBLISHED_MULTIVIEW_UNET))
+    assert unet == published_shapes("imagedream_unet_keys.txt")
+
+
+def test_tiny_models_round_trip_through_the_loaders(tiny, tmp_path):
+    lgm_folder, multiview_folder = tiny
+    weights = find_lgm(lgm_folder, tmp_path / "scene.yaml")
+    model = load_lgm(weights, "cpu")
+    saved = load_file(str(weights))
+    assert model.state_dict().keys() == saved.keys()
+    assert all(torch.equal(value, saved[key].float()) for key, value in model.state_dict().items())
+    inputs = torch.randn(1, 4, 9, TINY_LGM.input_size, TINY_LGM.input_size)
+    with torch.no_grad():
+        raw = model(inputs)
+    assert raw.shape == (1, 4, 14, TINY_LGM.splat_size, TINY_LGM.splat_size) == (1, 4, 14, 16, 16)
+    cloud = decode(raw[0])
+    assert len(cloud) == 4 * 16 * 16
+    assert np.all(np.abs(cloud.means) <= 1) and np.all((cloud.opacities > 0) & (cloud.opacities < 1))
+    assert np.allclose(np.linalg.norm(cloud.rotations, axis=1), 1) and np.all(cloud.scales > 0)
+
+    models = load_multiview(find_multiview(multiview_folder, tmp_path / "scene.yaml"), "cpu")
+    saved = load_file(str(multiview_folder / "unet" / "diffusion_pytorch_model.safetensors"))
+    assert all(torch.equal(value, saved[key]) for key, value in models.unet.state_dict().items())
+    image = np.ones((32, 32, 3), np.float32)
+    image[8:24, 10:22] = (0.8, 0.2, 0.1)
+    views = sample_views(models, image, steps=2, size=32)
+    assert views.shape == (4, 32, 32, 3) and views.min() >= 0 and views.max() <= 1
+
+
+def test_a_missing_or_partial_model_folder_says_where_and_how(tiny, tmp_path):
+    lgm_folder, multiview_folder = tiny
+    with pytest.raises(InputError) as missing:
+        find_lgm(None, tmp_path / "scene.yaml")
+    assert "reconstruct.prior" in str(missing.value) and "huggingface-cli download ashawkey/LGM" in str(missing.value)
+    broken = tmp_path / "lgm"
+    broken.mkdir()
+    shutil.copy(lgm_folder / "config.json", broken)
+    weights = load_file(str(lgm_folder / "model_fp16_fixrot.safetensors"))
+    weights["conv.weight"] = weights["conv.weight"][:7]
+    save_file(weights, str(broken / "model_fp16.safetensors"))
+    with pytest.raises(InputError, match=r"conv.weight \(7, 14, 1, 1\) instead of \(14, 14, 1, 1\)"):
+        find_lgm(broken, tmp_path / "scene.yaml")
+    partial = tmp_path / "imagedream"
+    shutil.copytree(multiview_folder, partial)
+    (partial / "image_encoder" / "model.safetensors").unlink()
+    with pytest.raises(InputError, match=rf"{partial} from the command line: image_encoder/ has no \*.safetensors"):
+        find_multiview(partial, tmp_path / "scene.yaml")
+
+
+def float64_rays(azimuth_deg: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Camera centre (3,) and unit directions (size,size,3) of LGM's view at ``azimuth_deg``: the camera of
+    azimuth 0 (at +z, looking at the origin, y up) turned about y by the azimuth, pixel by pixel."""
+    a = math.radians(azimuth_deg)
+    turn = np.array([[math.cos(a), 0, math.sin(a)], [0, 1, 0], [-math.sin(a), 0, math.cos(a)]])
+    centre = turn @ np.array([0.0, 0.0, CAMERA_RADIUS])
+    focal = size / 2 / math.tan(math.radians(FOVY_DEG) / 2)
+    directions = np.empty((size, size, 3))
+    for i in range(size):
+        for j in range(size):
+            camera = np.array([(j + 0.5 - size / 2) / focal, -(i + 0.5 - size / 2) / focal, -1.0])
+            directions[i, j] = turn @ camera / np.linalg.norm(camera)
+    return centre, directions
+
+
+def test_plucker_embedding_matches_float64():
+    size = 12
+    embedding = plucker_embedding(view_poses(), size).numpy()
+    assert embedding.shape == (4, 6, size, size)
+    for v, azimuth in enumerate(AZIMUTHS_DEG):
+        centre, directions = float64_rays(azimuth, size)
+        np.testing.assert_allclose(embedding[v, 3:].transpose(1, 2, 0), directions, atol=1e-6)
+        np.testing.assert_allclose(embedding[v, :3].transpose(1, 2, 0), np.cross(centre, directions), atol=1e-6)
+
+
+SPHERE_RADIUS = 0.5  # in LGM's cube
+
+
+def sphere_splatter(size: int) -> torch.Tensor:
+    """Raw splatter images (4,14,size,size) of a sphere about the origin: each pixel's Gaussian where its ray first
+    meets the sphere (opaque), transparent where the ray misses; standard deviation 0.01, grey."""
+    raw = torch.zeros(4, 14, size, size, dtype=torch.float64)
+    for v, azimuth in enumerate(AZIMUTHS_DEG):
+        centre, directions = float64_rays(azimuth, size)
+        along = -(directions @ centre)
+        closest = np.sum(centre ** 2) - along ** 2
+        hit = closest < SPHERE_RADIUS ** 2
+        t = along - np.sqrt(np.maximum(SPHERE_RADIUS ** 2 - closest, 0))
+        points = np.where(hit[..., None], centre + t[..., None] * directions, 0.0)
+        raw[v, 0:3] = torch.from_numpy(points.transpose(2, 0, 1))
+        raw[v, 3] = torch.from_numpy(np.where(hit, 8.0, -20.0))
+        raw[v, 4:7] = math.log(math.expm1(0.1))  # 0.1 softplus(x) = 0.01
+        raw[v, 7] = 1.0
+    return raw
+
+
+def test_splatter_pixels_land_on_their_rays():
+    size = 16
+    cloud = decode(sphere_splatter(size))
+    embedding = plucker_embedding(view_poses(), size).double().numpy()
+    moment = embedding[:, :3].transpose(0, 2, 3, 1).reshape(-1, 3)  # Gaussian n = (v s + row) s + col
+    direction = embedding[:, 3:].transpose(0, 2, 3, 1).reshape(-1, 3)
+    opaque = cloud.opacities > 0.5
+    assert 0.2 < opaque.mean() < 0.8
+    # on the line of its own pixel's ray: p x d = o x d (float32 embedding)
+    np.testing.assert_allclose(np.cross(cloud.means[opaque], direction[opaque]), moment[opaque], atol=2e-6)
+    # and not on a neighbour's: the pixel order is the documented one
+    shifted = np.roll(direction, 1, axis=0)
+    assert np.abs(np.cross(cloud.means[opaque], shifted[opaque]) - moment[opaque]).max() > 1e-2
+    assert len(prune(cloud)) == opaque.sum()
+
+
+def sphere_photograph(radius: float, distance: float, size: int, fov_deg: float = 40.0):
+    """K, mask and camera-space front depth (NaN off it) of a sphere on the optical axis, by ray casting."""
+    K = intrinsics_from_fov(fov_deg, size, size)
+    rays = pixel_rays(K, size, size)
+    along = rays[..., 2] * distance
+    closest = distance ** 2 - along ** 2
+    mask = closest < radius ** 2
+    t = along - np.sqrt(np.maximum(radius ** 2 - closest, 0))
+    return K, mask, np.where(mask, t * rays[..., 2], np.nan)
+
+
+def test_placed_sphere_renders_on_its_mask_at_the_prior_depth():
+    radius, distance, size = 0.1, 0.6, 128
+    K, mask, front = sphere_photograph(radius, distance, size)
+    placed = place(prune(decode(sphere_splatter(32))), mask, K, 2 * radius, front)
+    means = torch.tensor(placed.means, dtype=torch.float32)
+    render = splat.rasterize(means, torch.tensor(placed.opacities, dtype=torch.float32),
+                             torch.tensor(placed.colors, dtype=torch.float32), splat.Camera(K, np.eye(4), size, size),
+                             scales=torch.tensor(placed.scales, dtype=torch.float32),
+                             rotations=torch.tensor(placed.rotations, dtype=torch.float32))
+    covered = render.alpha.numpy() > 0.5
+    # the silhouette: all but a rim of Gaussian footprint and the poles, which views at elevation 0 graze
+    assert (covered & mask).sum() / (covered | mask).sum() > 0.85
+    np.testing.assert_allclose(np.argwhere(covered).mean(0), np.argwhere(mask).mean(0), atol=0.5)
+    # the nearest Gaussian in each pixel lies on the prior's front
+    coarse = np.diag([0.5, 0.5, 1.0]) @ K  # pixels of 2 x 2, so that most hold a front Gaussian
+    zbuffer, _ = nearest_depth(placed.means, coarse, (size // 2, size // 2))
+    inside, truth = mask[1::2, 1::2], front[1::2, 1::2]
+    both = inside & np.isfinite(zbuffer)
+    assert both.sum() > 0.8 * inside.sum()
+    assert np.median(np.abs(zbuffer[both] - truth[both])) < 0.03 * radius
+    np.testing.assert_allclose(placed.means.mean(0), [0, 0, distance], atol=0.05 * radius)
+
+
+def test_enclosed_volume_of_sampled_surfaces():
+    generator = np.random.default_rng(0)
+    sphere = generator.normal(size=(4000, 3))
+    sphere *= 0.5 / np.linalg.norm(sphere, axis=1, keepdims=True)
+    assert enclosed_volume(sphere) == pytest.approx(4 / 3 * math.pi * 0.5 ** 3, rel=0.1)
+    sides = np.array([0.4, 0.2, 0.3])
+    faces = generator.choice(3, size=6000, p=[0.06 / 0.26, 0.12 / 0.26, 0.08 / 0.26])  # by their areas
+    box = (generator.random((6000, 3)) - 0.5) * sides
+    box[np.arange(6000), faces] = np.sign(generator.random(6000) - 0.5) * sides[faces] / 2
+    turned = box @ np.linalg.qr(generator.normal(size=(3, 3)))[0].T
+    assert enclosed_volume(turned) == pytest.approx(np.prod(sides), rel=0.1)
+
+
+def test_prior_lgm_runs_in_pm_reconstruct(tiny, tmp_path, monkeypatch):
+    lgm_folder, multiview_folder = tiny
+    monkeypatch.setattr(prior_module, "DIFFUSION_STEPS", 2)
+    scene = write_scene(tmp_path / "scene", Capsule.tilted(distance=0.6), width=64, height=48, iterations=4)
+    config = yaml.safe_load(scene.read_text())
+    config["reconstruct"]["prior"] = "lgm"
+    scene.write_text(yaml.safe_dump(config))
+    out = tmp_path / "gaussians.h5"
+    main(["--scene", str(scene), "--out", str(out), "--device", "cpu", "--lgm-model", str(lgm_folder),
+          "--multiview-model", str(multiview_folder)])
+    artifact = read_artifact(out, GaussiansArtifact)
+    assert len(artifact.means) > 50
+    assert np.isfinite(artifact.object_volumes).all() and artifact.object_volumes[0] > 0
+    # every Gaussian's centre projects onto the object's mask, grown by the carving margin
+    uv = artifact.means @ artifact.K.T
+    cols, rows = (uv[:, :2] / uv[:, 2:]).T.astype(int)
+    assert ((rows >= 0) & (rows < 48) & (cols >= 0) & (cols < 64)).all()
+    grown = np.pad(artifact.mask == 1, 2, mode="edge")
+    near = np.zeros_like(artifact.mask, bool)
+    for dy in range(5):
+        for dx in range(5):
+            near |= grown[dy:dy + 48, dx:dx + 64]
+    assert near[rows, cols].mean() > 0.95
+
+
+def test_prior_lgm_without_weights_exits_2_saying_what_it_needs(tmp_path, capsys):
+    scene = write_scene(tmp_path / "scene", Capsule.tilted(), width=64, height=48, iterations=1)
+    config = yaml.safe_load(scene.read_text())
+    config["reconstruct"]["prior"] = "lgm"
+    scene.write_text(yaml.safe_dump(config))
+    with pytest.raises(SystemExit) as stopped:
+        main(["--scene", str(scene), "--out", str(tmp_path / "g.h5"), "--device", "cpu"])
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert "reconstruct.prior" in err and "LGM checkpoint" in err and "--lgm-model" in err
+    assert not (tmp_path / "g.h5").exists()
