@@ -59,7 +59,8 @@ def enhance(args: argparse.Namespace) -> None:
     log.info("backend %s, %d frames of %dx%d", backend, len(coarse.alpha), coarse.width, coarse.height)
     if backend == "flow":
         frames = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold,
-                                     scene.enhance.hidden_surfaces, scene.enhance.relight)
+                                     scene.enhance.hidden_surfaces, scene.enhance.relight,
+                                     ground=scene.physics.ground.enabled)
     else:
         if args.latents is None:
             raise InputError(args.scene, "enhance.backend", "the diffusion backend needs the inverted latents",

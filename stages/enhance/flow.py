@@ -26,6 +26,7 @@ from scipy import signal
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
+from .shadow import Shadows
 from .unseen import Continuation
 
 log = logging.getLogger("physmotion.enhance.flow")
@@ -99,7 +100,7 @@ def seen_fraction(confidence: np.ndarray, coherence: np.ndarray) -> np.ndarray:
 
 
 def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, threshold: float,
-                   hidden_surfaces: str = "photo", relight: bool = True) -> np.ndarray:
+                   hidden_surfaces: str = "photo", relight: bool = True, ground: bool = False) -> np.ndarray:
     """The flow-enhanced video.
 
     Args:
@@ -110,6 +111,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         hidden_surfaces: "photo" or "render", see the module docstring.
         relight: re-shade the object for where its surface faces in each frame (relight.py),
             when one light explains the photograph's shading.
+        ground: the objects stand on a ground, on which their shadows follow them (shadow.py).
     Returns:
         (T, h, w, 3) uint8 RGB frames.
     """
@@ -121,6 +123,9 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     coverage = object_coverage(gaussians.mask, w, h)
     continuation = Continuation.fit(coarse, gaussians, photo, coverage, lambda uv: photograph_at(fine_photo, uv),
                                     relight)
+    if ground:
+        relighting = continuation.relighting
+        shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None)
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
         rendered_uv = coarse.source_uv[t] * scale
@@ -133,7 +138,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
             trusted = np.maximum(trusted, trust(coarse.source_coherence[t], threshold))
         weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
-        background = backdrop(coarse.alpha[t], rendered_uv)
+        background = backdrop(coarse.alpha[t], rendered_uv, shadows(t, scale) if ground else None)
         frames[t] = blend_over_background(colour, coarse.alpha[t], background)
         on = coarse.alpha[t] > 0.5
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph, %.0f%% of them continuing "

@@ -63,6 +63,9 @@ TEXTURE_SPREADS = 4.0
 """A pixel counts as darkened only past this many robust standard deviations of the darkening away
 from the objects, where the ground's own texture left after smoothing sets it: the exemplar fill of
 a coarse periodic texture (tests/reconstruct) would otherwise read as a shadow."""
+PENUMBRA = 0.1
+"""Around the pixels found shadowed, this share of the objects' size is taken as their penumbra,
+darkened by however little: cut off at SHADOW_DEPTH, its edge would outline the shadow that left."""
 MAX_SHADOW = 0.8
 """Darkening divided out at most: deeper, the ground's colour is mostly noise."""
 
@@ -89,7 +92,11 @@ def photographed_shadow(background: np.ndarray, labels: np.ndarray) -> np.ndarra
     low = max(SHADOW_DEPTH[0], TEXTURE_SPREADS * spread)
     taken = np.clip((dark - low) / (SHADOW_DEPTH[1] - SHADOW_DEPTH[0]), 0, 1)
     near = np.clip((SHADOW_REACH - away) / (0.25 * SHADOW_REACH), 0, 1)
-    shadow = dark * taken * taken * (3 - 2 * taken) * near
+    # around what is surely shadow its faint penumbra is shadow too, however little it darkens
+    core = (taken * taken * (3 - 2 * taken)).astype(np.float32)
+    reach = 2 * max(1, round(PENUMBRA * size * scale)) + 1
+    penumbra = cv2.GaussianBlur(cv2.dilate(core, np.ones((reach, reach), np.uint8)), (0, 0), 1.0)
+    shadow = dark * np.maximum(core, penumbra) * near
     return np.clip(cv2.resize(shadow, (width, height), interpolation=cv2.INTER_LINEAR), 0, MAX_SHADOW)
 
 
