@@ -159,8 +159,8 @@ def tip_px(along: np.ndarray, across: np.ndarray) -> float:
 def largest_extent_px(mask: np.ndarray) -> float:
     """Largest extent (pixels) of a silhouette: its length along the longer of the principal axes of its
     pixels (a tilted object measures its own length, not an axis-aligned box's width), between the ends
-    of its edge located to a fraction of a pixel (tip_px). Counted in whole pixels it was up to a
-    pixel long or short: 7 % of a 14 px disc, 2 % of a 54 px one, three times that in volume."""
+    of its edge located to a fraction of a pixel (tip_px). Counted in whole pixels it would be up to
+    a pixel long or short: 7 % of a 14 px disc, 2 % of a 54 px one, three times that in volume."""
     points = np.argwhere(mask).astype(np.float64)
     centre = points.mean(0)
     _, axes = np.linalg.eigh((points - centre).T @ (points - centre))

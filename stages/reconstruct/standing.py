@@ -4,7 +4,7 @@ Things photographed standing are often turned (cups, bottles, tins) or boxed
 (cartons, books). Where such a solid's own image overlaps the silhouette by at
 least FIT_IOU it is taken for the body: a cylinder keeps its flat top and base
 and a box its corners, which the medial balls (closure.ball_depths) round off
-(an upright cylinder came out 0.58-0.69 of its volume, a turned box 0.56-0.70).
+(which give an upright cylinder 0.58-0.69 of its volume, a turned box 0.56-0.70).
 
 Every fit is made in the gravity frame of a view turned to face the object
 (GravityView: x horizontal across, y down along gravity, z horizontal towards

@@ -16,9 +16,9 @@ every cell's volume is shared equally by all particles in it, Gaussians
 included, so the body's mass is density times its occupied volume however
 the Gaussians cluster. The surface cuts the outer cells where the means lie
 (`inside_fraction`): each holds the part of it inside, so the volume does
-not depend on the lattice's phase or size (counting outer cells half, a
-10 cm box came out 0.78 to 1.10 of its volume at three cell sizes; now
-within 5 %).
+not depend on the lattice's phase or size (counted as half cells, a 10 cm
+box would hold 0.78 to 1.10 of its volume at three cell sizes; this way it
+holds it within 5 %).
 
 The means lie inside the silhouette the photograph saw: a reconstruction's
 Gaussians reach past their means to the silhouette (on the 12 cm synthetic
