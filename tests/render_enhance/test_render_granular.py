@@ -1,44 +1,69 @@
 """pm-render's granular material: a heap of sand shows the colours of the sand that fell.
 
-A ball of surfels (test_render_flow.surfel_sphere) photographed half orange (left) and half green
-(right). Its back, which the photograph never saw, is painted all green, as a closure that got the
-unseen side wrong would paint it: the photograph is the only truth on what colour the inside is. It
-slumps as sand under pm-simulate's own Simulation; the coarse render's heap is measured against the
-share of each colour at rest and against the lattice's spacing."""
+A log of surfels lying along the view, seen end-on: its front face photographed half orange (left)
+and half green (right). Its side and back, which the photograph never saw, are painted all green, as
+a closure that got the unseen side wrong would paint them; most of its inside lies nearer them than
+the front. The photograph is the only truth on what colour the inside is: the colour on each point's
+ray. The log slumps as sand under pm-simulate's own Simulation; the coarse render's heap is measured
+against the share of each colour at rest and against the lattice's spacing."""
 import cv2
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
 from schemas import materials as M
+from schemas.artifacts import GaussiansArtifact
 from schemas.scene import PhysicsConfig
 from stages.render.interior import EDGE_PX, GRAIN_SHADE, grain_colours, rest_ray_colours
 from stages.render.render import render_video
 from stages.simulate.simulation import Simulation
 
-from .test_render_flow import surfel_sphere
-
-SIZE, FOCAL, RADIUS, DISTANCE = 96, 240.0, 0.1, 1.0
+SIZE, FOCAL, RADIUS, LENGTH, DISTANCE = 96, 480.0, 0.06, 0.18, 1.0
 ORANGE, GREEN = np.array([0.95, 0.55, 0.15]), np.array([0.45, 0.75, 0.20])
 
 
-def two_coloured_ball():
-    """surfel_sphere photographed orange left of its centre and green right of it; its front surfels
-    take the photograph's colour, its back surfels all green."""
-    gaussians = surfel_sphere(size=SIZE, focal=FOCAL, radius_m=RADIUS, distance_m=DISTANCE)
+def surfels(points: np.ndarray, normals: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) scales and (n, 4) quaternions (w, x, y, z) of flat surfels at points facing along normals."""
+    quaternions = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(len(normals))], 1)
+    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True).clip(1e-12)
+    backwards = normals[:, 2] < -1 + 1e-9  # (0, 0, -1): half a turn about x
+    quaternions[backwards] = [0.0, 1.0, 0.0, 0.0]
+    return np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (len(points), 1)), quaternions
+
+
+def two_coloured_log() -> GaussiansArtifact:
+    """A closed cylinder of surfels (radius RADIUS, length LENGTH along the view, its front face DISTANCE
+    from the camera): front face orange left of the axis and green right of it, as photographed; side
+    and back green. The photograph: the front face's disc in those colours, on black."""
+    spacing = 0.004
+    r = np.sqrt(np.arange(0.5, 700)) / np.sqrt(700) * RADIUS
+    golden = np.pi * (3 - np.sqrt(5)) * np.arange(700)
+    cap = np.stack([r * np.cos(golden), r * np.sin(golden)], 1)
+    around = np.arange(0, 2 * np.pi, spacing / RADIUS)
+    along = np.arange(spacing / 2, LENGTH, spacing)
+    a, z = [m.ravel() for m in np.meshgrid(around, along)]
+    points = np.concatenate([np.c_[cap, np.full(700, DISTANCE)], np.c_[cap, np.full(700, DISTANCE + LENGTH)],
+                             np.c_[RADIUS * np.cos(a), RADIUS * np.sin(a), DISTANCE + z]])
+    normals = np.concatenate([np.tile([0.0, 0.0, -1.0], (700, 1)), np.tile([0.0, 0.0, 1.0], (700, 1)),
+                              np.c_[np.cos(a), np.sin(a), np.zeros_like(a)]])
+    scales, rotations = surfels(points, normals, spacing)
+    front = np.arange(len(points)) < 700
+    colours = np.where((front & (points[:, 0] < 0))[:, None], ORANGE, GREEN)
+    K = np.array([[FOCAL, 0, SIZE / 2], [0, FOCAL, SIZE / 2], [0, 0, 1]])
     rows, cols = np.mgrid[0:SIZE, 0:SIZE] + 0.5
     disc = np.hypot(cols - SIZE / 2, rows - SIZE / 2) < RADIUS * FOCAL / DISTANCE
-    photo = np.where((cols < SIZE / 2)[..., None], ORANGE, GREEN)
-    gaussians.photo[:] = np.where(disc[..., None], np.round(255 * photo), 0).astype(np.uint8)
-    gaussians.mask[:] = disc
-    front = gaussians.means[:, 2] < DISTANCE
-    gaussians.colors[:] = np.where((front & (gaussians.means[:, 0] < 0))[:, None], ORANGE, GREEN)
-    return gaussians
+    photo = np.where(disc[..., None], np.where((cols < SIZE / 2)[..., None], ORANGE, GREEN), 0.0)
+    return GaussiansArtifact(
+        K=K, world_to_camera=np.eye(4), width=SIZE, height=SIZE, means=points, scales=scales, rotations=rotations,
+        opacities=np.full(len(points), 0.9), colors=colours, object_id=np.zeros(len(points)),
+        photo=np.round(255 * photo).astype(np.uint8), mask=disc.astype(np.uint8),
+        background=np.zeros((SIZE, SIZE, 3), np.uint8), depth_prior=np.full((SIZE, SIZE), DISTANCE),
+        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
 
 
 @pytest.fixture(scope="module")
 def heap():
-    gaussians = two_coloured_ball()
+    gaussians = two_coloured_log()
     physics = PhysicsConfig(duration_s=0.4, fps=10, grid=24, ground={"enabled": True, "type": "friction",
                                                                       "friction": 0.5})
     trajectories = Simulation(physics, [M.Sand(friction_angle_deg=30)], gaussians.means, gaussians.object_id,

@@ -215,10 +215,13 @@ def test_a_grain_of_sand_is_a_hard_grain_the_size_of_the_lattice():
     centre its alpha falls from 0.9 to 0.1 within a quarter of its half-alpha radius there plus a pixel,
     where the soft grain of a torn solid (round, of its share of the volume) takes over 1.4 radii. The
     grains are turned at random: their long axes' mean |component| along each axis is that of
-    directions uniform on the sphere, 1/2."""
+    directions uniform on the sphere, 1/2. A particle that carries more volume (a side wall's surface
+    Gaussian) is a grain of the same size."""
     volume, spacing = 0.03 ** 3, 0.03
     materials = np.array([M.PRESETS.index("sand")] * 999 + [M.PRESETS.index("jelly")])
-    shapes, opacity = grain_shapes(np.full(1000, volume), np.full(1000, spacing), materials, np.ones(1000))
+    volumes = np.where(np.arange(1000) % 2, volume, 20 * volume)
+    volumes[-1] = volume
+    shapes, opacity = grain_shapes(volumes, np.full(1000, spacing), materials, np.ones(1000))
     radius = GRAIN_SIGMA * np.sqrt(2 * np.log(2)) * spacing
     level = 2 * np.log(2 * opacity[0])  # alpha 1/2 on x^T C^-1 x = level
     half_axes = np.sqrt(np.linalg.eigvalsh(shapes[:999]) * level)
