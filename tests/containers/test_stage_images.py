@@ -61,7 +61,8 @@ def test_image_holds_its_stage_only(images, stage, tmp_path):
     assert all(f"usage: {program}" in proc.stdout for program in PROGRAMS[stage]), proc.stdout[-2000:]
     held = json.loads(proc.stdout.strip().splitlines()[-1])
     assert held["stages"] == [stage], "an image holds its own stage's code only"
-    assert held["diffusers"] == (stage == "enhance"), "only the enhance image may hold diffusers"
+    assert held["diffusers"] == (stage in ("enhance", "reconstruct")), \
+        "only the enhance and reconstruct (prior lgm) images may hold diffusers"
 
 
 def datasets(path: Path) -> dict[str, np.ndarray]:
