@@ -42,7 +42,7 @@ TRACED_SHARE = 0.4
 """... and an end circle whose image traces the outline along this share of its points can be a flat face
 (an upright cylinder's end: 0.43-0.65 of its points; a ball's circles, which touch it at a point or two
 and curve away, 0.31-0.47)."""
-END_SEARCH_PX = 6.0
+END_SEARCH_PX = 8.0
 FACE_PX = 1.5
 FACE_SPAN = 0.3
 """A flat face's height and radius are refined together, within FACE_PX of the slab it ends on and 4 % of
@@ -60,11 +60,18 @@ centre, keep 0.76 of it; an upright cylinder's 0.98-1.02)."""
 CIRCLE_POINTS = 72
 SLICES = 240
 """Horizontal slices of a body of revolution: a quarter of a pixel each on a 60 px body."""
-HIDDEN_PX2 = 1.0
+HIDDEN_PX = 0.3
+"""The widest circles that fit along a face's rim touch the outline all along it, and the pixels'
+staircase leaves them a fifth of a pixel short there: circles beyond the face, which touch it at a point
+or two, fill that band."""
 SUPERSAMPLE = 4
 """Raster cells per pixel side, for which slice covers which part of the image."""
 BOX_YAWS_DEG = (0.0, 20.0, 40.0, 60.0, 80.0)
 """The box's fit starts from these turns (a box turned by 90 degrees is the same box)."""
+AREA_ROUNDS = 2
+"""A body of revolution's radii are scaled, this many times, until its image has as many pixels as the
+silhouette (less a handle): the widest circles that fit touch the outline at a point or two, where the
+pixels' staircase leaves them 0.1-0.2 px long or short; counting the pixels averages over all of them."""
 ROUND_FIRST = 0.01
 """A box is taken over a body of revolution only where its image overlaps by this much more: seen level,
 an upright cylinder's silhouette is a box's."""
@@ -304,10 +311,11 @@ def revolution(view: GravityView) -> Optional[Revolution]:
 
 def seen_ends(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray) -> tuple[int, int]:
     """The first and last slab (indices) whose images are not hidden inside the others': seen from above (or
-    below), circles beyond an end face fit inside its image. An end may uncover HIDDEN_PX2 of the image
-    (the raster's own steps)."""
+    below), circles beyond an end face fit inside its image. An end may uncover a band HIDDEN_PX wide along
+    the silhouette's width."""
     kmax, kmin = covering_slices(view, axis_x, edges, radii)
-    spare = int(HIDDEN_PX2 * SUPERSAMPLE ** 2)
+    _, cols = np.nonzero(view.mask)
+    spare = int(HIDDEN_PX * np.ptp(cols) * SUPERSAMPLE ** 2)
     top = int(np.sort(kmax)[min(spare, len(kmax) - 1)])
     bottom = int(np.sort(kmin)[max(len(kmin) - 1 - spare, 0)])
     return top, bottom
@@ -491,8 +499,9 @@ def image_of(view: GravityView, solid: Revolution | UprightBox) -> tuple[np.ndar
     return np.isfinite(front), front, back
 
 
-def overlap(view: GravityView, image: np.ndarray) -> float:
-    """IoU of the solid's image (H,W) bool with the silhouette less its handles (HANDLE_THICKNESS)."""
+def overlap(view: GravityView, image: np.ndarray) -> tuple[float, np.ndarray]:
+    """IoU of the solid's image (H,W) bool with the silhouette less its handles (HANDLE_THICKNESS), and that
+    part of the silhouette (H,W) bool."""
     mask = view.mask
     rest = mask & (ndimage.distance_transform_edt(~image) > NEAR_PX)
     pieces, count = ndimage.label(rest)
@@ -503,7 +512,7 @@ def overlap(view: GravityView, image: np.ndarray) -> float:
         if ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max() <= HANDLE_THICKNESS * own:
             handles[piece] |= part
     target = mask & ~handles
-    return float(np.sum(image & target) / max(np.sum(image | target), 1))
+    return float(np.sum(image & target) / max(np.sum(image | target), 1)), target
 
 
 def standing_solid(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> Optional[StandingSolid]:
@@ -519,7 +528,12 @@ def standing_solid(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> Optiona
         if solid is None:
             continue
         image, front, back = image_of(view, solid)
-        share = overlap(view, image)
+        share, target = overlap(view, image)
+        if isinstance(solid, Revolution):
+            for _ in range(AREA_ROUNDS):  # its pixels as many as the silhouette's, less a handle
+                solid = Revolution(solid.axis_x, solid.edges, solid.radii * math.sqrt(target.sum() / image.sum()))
+                image, front, back = image_of(view, solid)
+                share, target = overlap(view, image)
         if share >= FIT_IOU and (found is None or share > found.overlap + ROUND_FIRST):
             rays = view.rays(*np.nonzero(mask))
             base = solid.base_height()
