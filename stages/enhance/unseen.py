@@ -31,7 +31,7 @@ import numpy as np
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import normalised_blur, sample_at
+from .compositing import STILL_PX, normalised_blur, sample_at
 from .relight import Relighting, Shading, smooth_normals, to_linear, to_srgb
 
 log = logging.getLogger("physmotion.enhance.unseen")
@@ -40,7 +40,7 @@ RECORDED_FACING = (0.3, 0.55)
 """Cosine between the surface's normal and the view ray (at rest) from which the photograph's pixel
 starts to be, and is fully, a record of the surface's colour. Below, a pixel spans a strip of surface
 (at 0.3, more than three times its width along it) and its colour is the limb's dark, blurred rim."""
-RECORDED_SHADING = (0.2, 0.35)
+RECORDED_SHADING = (0.1, 0.2)
 """Share of the brightest shading (ambient + |light|) from which the photograph's pixel starts to be,
 and is fully, a record of the surface's colour: in deep shade dividing by the shading amplifies noise."""
 UNCHANGED = 0.2
@@ -157,8 +157,8 @@ class Albedo:
     Use :meth:`fit`.
     """
 
-    def __init__(self, photo_linear, shading_rest, recorded, continued, inside, facing_rest):
-        self.photo_linear, self.shading_rest = photo_linear, shading_rest
+    def __init__(self, photo_linear, shading_rest, recorded, continued, inside, facing_rest, coverage):
+        self.photo_linear, self.shading_rest, self.coverage = photo_linear, shading_rest, coverage
         self.recorded, self.continued, self.inside, self.facing_rest = recorded, continued, inside, facing_rest
 
     @classmethod
@@ -187,7 +187,8 @@ class Albedo:
         continued = continue_inwards(albedo, recorded > 0.5, inside)
         log.info("unseen surfaces: %.0f%% of the objects' pixels record their colour well, the rest is continued",
                  100 * float((recorded > 0.5)[mask > 0.5].mean()) if (mask > 0.5).any() else 0.0)
-        return cls(photo_linear, shading_rest, recorded, continued, inside.astype(np.float32), facing_rest)
+        return cls(photo_linear, shading_rest, recorded, continued, inside.astype(np.float32), facing_rest,
+                   mask.astype(np.float32))
 
 
 def continue_inwards(values: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -257,10 +258,13 @@ class Continuation:
         return mirrored_source(uv, self.front_distance, self.rays, self.planes.normal[k], self.planes.offset[k],
                                self.coarse.K)
 
-    def read(self, uv: np.ndarray, shading_now: np.ndarray, facing_now: np.ndarray) -> tuple[np.ndarray, ...]:
+    def read(self, uv: np.ndarray, shading_now: np.ndarray, facing_now: np.ndarray,
+             still: np.ndarray) -> tuple[np.ndarray, ...]:
         """Colour (h, w, 3, linear), the shading its source had (h, w) and whether it is on an object
         (h, w), for a surface now shaded ``shading_now`` and facing ``facing_now`` whose colour the
-        photograph holds at uv: its own pixel where recorded well or seen as it was, else continued."""
+        photograph holds at uv: its own pixel where recorded well or seen as it was, else continued.
+        ``still`` (h, w) in [0, 1]: how much the pixel stands where its source is; the photograph's
+        pixels along the silhouette, which mix in the background, are its own only there."""
         a = self.albedo
         shading_then = sample_at(a.shading_rest, uv)
         recorded = sample_at(a.recorded, uv)
@@ -269,7 +273,7 @@ class Continuation:
             np.linalg.norm(self.relighting.shading.light))
         unchanged = (np.clip(1 - np.abs(np.nan_to_num(facing_now) - facing_then) / UNCHANGED, 0, 1)
                      * np.clip(1 - np.abs(shading_now - shading_then) / (UNCHANGED * relit), 0, 1))
-        own = np.maximum(recorded, unchanged)[..., None]
+        own = np.maximum(recorded, unchanged * np.maximum(sample_at(a.coverage, uv), still))[..., None]
         from_fine = to_linear(self.photograph_at(uv))
         gain = np.clip(shading_now / np.maximum(shading_then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)[..., None]
         continued = sample_at(a.continued, uv) * shading_now[..., None]
@@ -285,8 +289,12 @@ class Continuation:
             rendered: (h, w, 3) the render's colour, sRGB in [0, 255].
         """
         shading_now, facing_now = self.shading_now(t)
-        direct, shading_direct, inside_direct = self.read(uv, shading_now, facing_now)
-        mirrored, shading_mirrored, inside_mirrored = self.read(self.mirror(uv), shading_now, facing_now)
+        h, w = seen.shape
+        moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
+        still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
+        direct, shading_direct, inside_direct = self.read(uv, shading_now, facing_now, still)
+        mirrored, shading_mirrored, inside_mirrored = self.read(self.mirror(uv), shading_now, facing_now,
+                                                                np.zeros_like(still))
         s = np.clip(seen, 0, 1)
         colour = s[..., None] * direct + (1 - s[..., None]) * mirrored
         inside = s * inside_direct + (1 - s) * inside_mirrored
