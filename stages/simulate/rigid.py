@@ -46,34 +46,62 @@ import numpy as np
 import warp as wp
 
 from .mpm import GROUND_FRICTION, GROUND_NONE, GROUND_SLIP
+from .state import Particles
+
+
+@wp.struct
+class Members:
+    """The rigid objects' particles, M of them."""
+
+    particle: wp.array(dtype=wp.int32)  # (M,) index among the solver's particles
+    body: wp.array(dtype=wp.int32)  # (M,) index of its body
+    rest_offset: wp.array(dtype=wp.vec3)  # (M,) from its body's centre of mass at rest, m
+
+
+@wp.struct
+class Bodies:
+    """The rigid bodies' state, B of them (simulation frame)."""
+
+    total_mass: wp.array(dtype=float)  # (B,) kg
+    rest_inertia: wp.array(dtype=wp.mat33)  # (B,) about the centre of mass at rest, kg m^2
+    floor: wp.array(dtype=float)  # (B,) the ground, or the lowest rest point where that lies below it, m
+    restitution: wp.array(dtype=float)  # (B,) of the material
+    centre: wp.array(dtype=wp.vec3)  # (B,) centre of mass, m
+    orientation: wp.array(dtype=wp.quat)  # (B,) rotation from rest
+    velocity: wp.array(dtype=wp.vec3)  # (B,) of the centre, m/s
+    spin: wp.array(dtype=wp.vec3)  # (B,) angular velocity, rad/s
+
+
+@wp.struct
+class BodySums:
+    """What gather_rigid_momentum sums per body in a substep and integrate_rigid_bodies clears."""
+
+    linear: wp.array(dtype=wp.vec3)  # (B,) momentum, kg m/s
+    angular: wp.array(dtype=wp.vec3)  # (B,) angular momentum about the centre, kg m^2/s
+    lowest: wp.array(dtype=float)  # (B,) lowest point's height below the centre (offset y), m
+    support: wp.array2d(dtype=float)  # (B, 4) min x, min z, -max x, -max z of the points on the ground, m
+    held_mass: wp.array(dtype=float)  # (B,) of the particles a condition holds, kg
+    held_first: wp.array(dtype=wp.vec3)  # (B,) their first moment about the centre, kg m
+    held_second: wp.array(dtype=wp.mat33)  # (B,) their second moment, kg m^2
+    held_linear: wp.array(dtype=wp.vec3)  # (B,) their momentum, kg m/s
+    held_angular: wp.array(dtype=wp.vec3)  # (B,) their angular momentum about the centre, kg m^2/s
+
+
+@wp.struct
+class RigidStep:
+    """One substep's length and the ground the bodies meet."""
+
+    dt: float  # s
+    dx: float  # the grid's cell size, m (APIC's spin term)
+    ground_kind: int  # mpm.GROUND_NONE ... GROUND_FRICTION
+    friction: float  # Coulomb coefficient
+    ground_y: float  # the ground's height, m (-1e30: none)
+    contact_height: float  # points this close above the ground touch it, m
+    resting_speed: float  # an approach slower than this (m/s) is a body resting on the ground
 
 
 @wp.kernel
-def gather_rigid_momentum(
-    members: wp.array(dtype=wp.int32),
-    body: wp.array(dtype=wp.int32),
-    rest_offset: wp.array(dtype=wp.vec3),
-    orientation: wp.array(dtype=wp.quat),
-    mass: wp.array(dtype=float),
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    C: wp.array(dtype=wp.mat33),
-    free: wp.array(dtype=wp.int32),
-    spin: wp.array(dtype=wp.vec3),
-    dx: float,
-    prescribed: wp.array(dtype=wp.int32),
-    ground_y: float,
-    contact_height: float,
-    linear: wp.array(dtype=wp.vec3),
-    angular: wp.array(dtype=wp.vec3),
-    lowest: wp.array(dtype=float),
-    support: wp.array2d(dtype=float),
-    held_mass: wp.array(dtype=float),
-    held_first: wp.array(dtype=wp.vec3),
-    held_second: wp.array(dtype=wp.mat33),
-    held_linear: wp.array(dtype=wp.vec3),
-    held_angular: wp.array(dtype=wp.vec3),
-):
+def gather_rigid_momentum(step: RigidStep, members: Members, bodies: Bodies, particles: Particles, sums: BodySums):
     """Sum each body's linear momentum (kg m/s), angular momentum about its centre (kg m^2/s), find its
     lowest point below the centre (m) and the extent of its points within contact_height of the
     ground (support[b] = min x, min z, -max x, -max z, m); and of its particles a condition holds
@@ -89,29 +117,31 @@ def gather_rigid_momentum(
     would make a free spin grow every substep.
     """
     i = wp.tid()
-    p = members[i]
-    b = body[i]
-    momentum = mass[p] * v[p]
-    offset = wp.quat_rotate(orientation[b], rest_offset[i])
+    p = members.particle[i]
+    b = members.body[i]
+    m = particles.mass[p]
+    momentum = m * particles.v[p]
+    offset = wp.quat_rotate(bodies.orientation[b], members.rest_offset[i])
     turning = wp.cross(offset, momentum)
-    if free[p] == 0:
-        c = C[p]
+    if particles.free[p] == 0:
+        c = particles.C[p]
         affine = wp.vec3(c[2, 1] - c[1, 2], c[0, 2] - c[2, 0], c[1, 0] - c[0, 1])
-        turning += (0.25 * dx * dx * mass[p]) * (affine - 2.0 * spin[b])
-    wp.atomic_add(linear, b, momentum)
-    wp.atomic_add(angular, b, turning)
-    wp.atomic_min(lowest, b, offset[1])
-    if prescribed[p] != 0:
-        wp.atomic_add(held_mass, b, mass[p])
-        wp.atomic_add(held_first, b, mass[p] * offset)
-        wp.atomic_add(held_second, b, mass[p] * wp.outer(offset, offset))
-        wp.atomic_add(held_linear, b, momentum)
-        wp.atomic_add(held_angular, b, wp.cross(offset, momentum))
-    if x[p][1] <= ground_y + contact_height:
-        wp.atomic_min(support, b, 0, x[p][0])
-        wp.atomic_min(support, b, 1, x[p][2])
-        wp.atomic_min(support, b, 2, -x[p][0])
-        wp.atomic_min(support, b, 3, -x[p][2])
+        turning += (0.25 * step.dx * step.dx * m) * (affine - 2.0 * bodies.spin[b])
+    wp.atomic_add(sums.linear, b, momentum)
+    wp.atomic_add(sums.angular, b, turning)
+    wp.atomic_min(sums.lowest, b, offset[1])
+    if particles.prescribed[p] != 0:
+        wp.atomic_add(sums.held_mass, b, m)
+        wp.atomic_add(sums.held_first, b, m * offset)
+        wp.atomic_add(sums.held_second, b, m * wp.outer(offset, offset))
+        wp.atomic_add(sums.held_linear, b, momentum)
+        wp.atomic_add(sums.held_angular, b, wp.cross(offset, momentum))
+    x = particles.x[p]
+    if x[1] <= step.ground_y + step.contact_height:
+        wp.atomic_min(sums.support, b, 0, x[0])
+        wp.atomic_min(sums.support, b, 1, x[2])
+        wp.atomic_min(sums.support, b, 2, -x[0])
+        wp.atomic_min(sums.support, b, 3, -x[2])
 
 
 @wp.func
@@ -166,30 +196,7 @@ def held_motion(total_mass: float, inertia: wp.mat33, V: wp.vec3, omega: wp.vec3
 
 
 @wp.kernel
-def integrate_rigid_bodies(
-    dt: float,
-    ground_kind: int,
-    friction: float,
-    ground_y: float,
-    resting_speed: float,
-    floor: wp.array(dtype=float),
-    restitution: wp.array(dtype=float),
-    lowest: wp.array(dtype=float),
-    support: wp.array2d(dtype=float),
-    total_mass: wp.array(dtype=float),
-    rest_inertia: wp.array(dtype=wp.mat33),
-    linear: wp.array(dtype=wp.vec3),
-    angular: wp.array(dtype=wp.vec3),
-    held_mass: wp.array(dtype=float),
-    held_first: wp.array(dtype=wp.vec3),
-    held_second: wp.array(dtype=wp.mat33),
-    held_linear: wp.array(dtype=wp.vec3),
-    held_angular: wp.array(dtype=wp.vec3),
-    centre: wp.array(dtype=wp.vec3),
-    orientation: wp.array(dtype=wp.quat),
-    velocity: wp.array(dtype=wp.vec3),
-    spin: wp.array(dtype=wp.vec3),
-):
+def integrate_rigid_bodies(step: RigidStep, bodies: Bodies, sums: BodySums):
     """Velocities from momenta, the ground's impulse, the held particles (held_motion), then advance centre
     and orientation; clears the sums.
 
@@ -201,25 +208,27 @@ def integrate_rigid_bodies(
     its floor is lifted back onto it.
     """
     b = wp.tid()
-    R = wp.quat_to_matrix(orientation[b])
-    inv_mass = 1.0 / total_mass[b]
-    inertia = R * rest_inertia[b] * wp.transpose(R)
+    dt = step.dt
+    support = sums.support
+    R = wp.quat_to_matrix(bodies.orientation[b])
+    inv_mass = 1.0 / bodies.total_mass[b]
+    inertia = R * bodies.rest_inertia[b] * wp.transpose(R)
     inv_inertia = wp.inverse(inertia)
-    V = linear[b] * inv_mass
-    omega = inv_inertia * angular[b]
-    c = centre[b]
-    if ground_kind != GROUND_NONE and support[b, 0] < 1.0e29:
+    V = sums.linear[b] * inv_mass
+    omega = inv_inertia * sums.angular[b]
+    c = bodies.centre[b]
+    if step.ground_kind != GROUND_NONE and support[b, 0] < 1.0e29:
         # centre of pressure: below the centre of mass, clamped into the support's extent
-        pressure = wp.vec3(wp.clamp(c[0], support[b, 0], -support[b, 2]), ground_y,
+        pressure = wp.vec3(wp.clamp(c[0], support[b, 0], -support[b, 2]), step.ground_y,
                            wp.clamp(c[2], support[b, 1], -support[b, 3]))
         r = pressure - c
         up = wp.vec3(0.0, 1.0, 0.0)
         approach = -wp.dot(V + wp.cross(omega, r), up)  # speed toward the ground, m/s
-        gap = wp.max(c[1] + lowest[b] - floor[b], 0.0)  # how far the lowest point is above its floor, m
+        gap = wp.max(c[1] + sums.lowest[b] - bodies.floor[b], 0.0)  # how far the lowest point is above its floor, m
         if approach > 0.0 and approach * dt >= gap:  # it reaches the floor within this substep
             rebound = float(0.0)
-            if approach > resting_speed:
-                rebound = restitution[b] * approach
+            if approach > step.resting_speed:
+                rebound = bodies.restitution[b] * approach
             normal = (approach + rebound) / impulse_response(r, up, inv_mass, inv_inertia)
             V, omega = push_at(r, normal * up, inv_mass, inv_inertia, V, omega)
             # it reached the floor after gap / approach of dt and left it at the rebound speed since: the
@@ -228,63 +237,51 @@ def integrate_rigid_bodies(
             slide = V + wp.cross(omega, r)
             slide = wp.vec3(slide[0], 0.0, slide[2])
             speed = wp.length(slide)
-            if ground_kind != GROUND_SLIP and speed > 0.0:
+            if step.ground_kind != GROUND_SLIP and speed > 0.0:
                 along = slide / speed
                 stop = speed / impulse_response(r, along, inv_mass, inv_inertia)  # impulse that stops sliding
-                if ground_kind == GROUND_FRICTION:
-                    stop = wp.min(stop, friction * normal)
+                if step.ground_kind == GROUND_FRICTION:
+                    stop = wp.min(stop, step.friction * normal)
                 V, omega = push_at(r, -stop * along, inv_mass, inv_inertia, V, omega)
-    if held_mass[b] > 0.0:
-        V, omega = held_motion(total_mass[b], inertia, V, omega, held_mass[b], held_first[b], held_second[b],
-                               held_linear[b], held_angular[b])
-    sink = floor[b] - (c[1] + lowest[b] + dt * V[1])
+    if sums.held_mass[b] > 0.0:
+        V, omega = held_motion(bodies.total_mass[b], inertia, V, omega, sums.held_mass[b], sums.held_first[b],
+                               sums.held_second[b], sums.held_linear[b], sums.held_angular[b])
+    sink = bodies.floor[b] - (c[1] + sums.lowest[b] + dt * V[1])
     if sink > 0.0:
         V = wp.vec3(V[0], wp.max(V[1], 0.0), V[2])
         c = c + wp.vec3(0.0, sink, 0.0)
-    lowest[b] = 1.0e30
+    sums.lowest[b] = 1.0e30
     for a in range(4):
         support[b, a] = 1.0e30
     angle = wp.length(omega) * dt
     if angle > 0.0:
         turn = wp.quat_from_axis_angle(wp.normalize(omega), angle)
-        orientation[b] = wp.normalize(turn * orientation[b])
-    centre[b] = c + dt * V
-    velocity[b] = V
-    spin[b] = omega
-    linear[b] = wp.vec3(0.0)
-    angular[b] = wp.vec3(0.0)
-    held_mass[b] = 0.0
-    held_first[b] = wp.vec3(0.0)
-    held_second[b] = wp.mat33(0.0)
-    held_linear[b] = wp.vec3(0.0)
-    held_angular[b] = wp.vec3(0.0)
+        bodies.orientation[b] = wp.normalize(turn * bodies.orientation[b])
+    bodies.centre[b] = c + dt * V
+    bodies.velocity[b] = V
+    bodies.spin[b] = omega
+    sums.linear[b] = wp.vec3(0.0)
+    sums.angular[b] = wp.vec3(0.0)
+    sums.held_mass[b] = 0.0
+    sums.held_first[b] = wp.vec3(0.0)
+    sums.held_second[b] = wp.mat33(0.0)
+    sums.held_linear[b] = wp.vec3(0.0)
+    sums.held_angular[b] = wp.vec3(0.0)
 
 
 @wp.kernel
-def apply_rigid_motion(
-    members: wp.array(dtype=wp.int32),
-    body: wp.array(dtype=wp.int32),
-    rest_offset: wp.array(dtype=wp.vec3),
-    centre: wp.array(dtype=wp.vec3),
-    orientation: wp.array(dtype=wp.quat),
-    velocity: wp.array(dtype=wp.vec3),
-    spin: wp.array(dtype=wp.vec3),
-    x: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    C: wp.array(dtype=wp.mat33),
-    F: wp.array(dtype=wp.mat33),
-):
+def apply_rigid_motion(members: Members, bodies: Bodies, particles: Particles):
     """Place each member particle on its body's rigid motion."""
     i = wp.tid()
-    p = members[i]
-    b = body[i]
-    q = orientation[b]
-    offset = wp.quat_rotate(q, rest_offset[i])
-    omega = spin[b]
-    x[p] = centre[b] + offset
-    v[p] = velocity[b] + wp.cross(omega, offset)
-    C[p] = wp.skew(omega)
-    F[p] = wp.quat_to_matrix(q)
+    p = members.particle[i]
+    b = members.body[i]
+    q = bodies.orientation[b]
+    offset = wp.quat_rotate(q, members.rest_offset[i])
+    omega = bodies.spin[b]
+    particles.x[p] = bodies.centre[b] + offset
+    particles.v[p] = bodies.velocity[b] + wp.cross(omega, offset)
+    particles.C[p] = wp.skew(omega)
+    particles.F[p] = wp.quat_to_matrix(q)
 
 
 class RigidBodies:
@@ -318,45 +315,48 @@ class RigidBodies:
             totals.append(m.sum())
             floors.append(min(float(ground_y), float(rest_positions[idx, 1].min())))
         n = len(rigid_objects)
-        self.n_members = int(sum(len(i) for i in members))
+        self.n_members, self.n_bodies = int(sum(len(i) for i in members)), n
         self.members = wp.array(np.concatenate(members).astype(np.int32), dtype=wp.int32, device=device)
-        self.body = wp.array(np.concatenate(bodies).astype(np.int32), dtype=wp.int32, device=device)
-        self.rest_offset = wp.array(np.concatenate(offsets).astype(np.float32), dtype=wp.vec3, device=device)
-        self.total_mass = wp.array(np.array(totals, np.float32), dtype=float, device=device)
-        self.rest_inertia = wp.array(np.array(inertias, np.float32), dtype=wp.mat33, device=device)
-        self.centre = wp.array(np.array(centres, np.float32), dtype=wp.vec3, device=device)
-        self.orientation = wp.array(np.tile(np.array([0, 0, 0, 1], np.float32), (n, 1)), dtype=wp.quat, device=device)
-        self.velocity = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.spin = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.linear = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.angular = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.lowest = wp.array(np.full(n, 1e30, np.float32), dtype=float, device=device)
-        self.floor = wp.array(np.array(floors, np.float32), dtype=float, device=device)
-        self.restitution = wp.array(np.array([m.restitution for m in rigid_objects.values()], np.float32),
-                                    dtype=float, device=device)
-        self.held_mass = wp.zeros(n, dtype=float, device=device)
-        self.held_first = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.held_second = wp.zeros(n, dtype=wp.mat33, device=device)
-        self.held_linear = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.held_angular = wp.zeros(n, dtype=wp.vec3, device=device)
-        self.support = wp.array(np.full((n, 4), 1e30, np.float32), dtype=float, device=device)
-        self._ground_y = float(ground_y)
+        self.member_state = Members()
+        self.member_state.particle = self.members
+        self.member_state.body = wp.array(np.concatenate(bodies).astype(np.int32), dtype=wp.int32, device=device)
+        self.member_state.rest_offset = wp.array(np.concatenate(offsets).astype(np.float32), dtype=wp.vec3,
+                                                 device=device)
+        self.bodies = Bodies()
+        self.bodies.total_mass = wp.array(np.array(totals, np.float32), dtype=float, device=device)
+        self.bodies.rest_inertia = wp.array(np.array(inertias, np.float32), dtype=wp.mat33, device=device)
+        self.bodies.floor = wp.array(np.array(floors, np.float32), dtype=float, device=device)
+        self.bodies.restitution = wp.array(np.array([m.restitution for m in rigid_objects.values()], np.float32),
+                                           dtype=float, device=device)
+        self.bodies.centre = wp.array(np.array(centres, np.float32), dtype=wp.vec3, device=device)
+        self.bodies.orientation = wp.array(np.tile(np.array([0, 0, 0, 1], np.float32), (n, 1)), dtype=wp.quat,
+                                           device=device)
+        self.bodies.velocity = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.bodies.spin = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.sums = BodySums()
+        self.sums.linear = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.sums.angular = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.sums.lowest = wp.array(np.full(n, 1e30, np.float32), dtype=float, device=device)
+        self.sums.support = wp.array(np.full((n, 4), 1e30, np.float32), dtype=float, device=device)
+        self.sums.held_mass = wp.zeros(n, dtype=float, device=device)
+        self.sums.held_first = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.sums.held_second = wp.zeros(n, dtype=wp.mat33, device=device)
+        self.sums.held_linear = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.sums.held_angular = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.step = RigidStep()
+        self.step.ground_kind = ground.kind
+        self.step.friction = ground.friction
+        self.step.ground_y = float(ground_y)
+        self.step.contact_height = self.contact_height
         self.device = device
 
     def project(self, solver, dt: float) -> None:
         """Replace the rigid objects' particle motion after G2P by their rigid motion."""
-        n, dev = self.n_members, self.device
-        held = [self.held_mass, self.held_first, self.held_second, self.held_linear, self.held_angular]
-        wp.launch(gather_rigid_momentum, dim=n, device=dev, inputs=[
-            self.members, self.body, self.rest_offset, self.orientation, solver.mass, solver.x, solver.v, solver.C,
-            solver.free, self.spin, solver.grid.dx, solver.prescribed, self._ground_y, self.contact_height,
-            self.linear, self.angular, self.lowest, self.support, *held])
+        step, members, bodies, sums, particles = self.step, self.member_state, self.bodies, self.sums, solver.particles
+        step.dt, step.dx = dt, solver.grid.dx
         # a body resting on the ground approaches it at what one substep of gravity gives it
-        resting_speed = 2.0 * dt * float(np.linalg.norm(solver.gravity))
-        wp.launch(integrate_rigid_bodies, dim=len(self.total_mass), device=dev, inputs=[
-            dt, self.ground.kind, self.ground.friction, self._ground_y, resting_speed, self.floor, self.restitution,
-            self.lowest, self.support, self.total_mass, self.rest_inertia, self.linear, self.angular, *held,
-            self.centre, self.orientation, self.velocity, self.spin])
-        wp.launch(apply_rigid_motion, dim=n, device=dev, inputs=[
-            self.members, self.body, self.rest_offset, self.centre, self.orientation, self.velocity, self.spin,
-            solver.x, solver.v, solver.C, solver.F])
+        step.resting_speed = 2.0 * dt * float(np.linalg.norm(solver.gravity))
+        wp.launch(gather_rigid_momentum, dim=self.n_members, device=self.device,
+                  inputs=[step, members, bodies, particles, sums])
+        wp.launch(integrate_rigid_bodies, dim=self.n_bodies, device=self.device, inputs=[step, bodies, sums])
+        wp.launch(apply_rigid_motion, dim=self.n_members, device=self.device, inputs=[members, bodies, particles])
