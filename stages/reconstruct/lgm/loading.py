@@ -10,6 +10,7 @@ whose keys must be the published ones), and the multi-view folder's
 """
 from __future__ import annotations
 
+import inspect
 import json
 import logging
 import os
@@ -177,12 +178,20 @@ def multiview_problem(folder: Path) -> Optional[str]:
     for part in ("unet", "vae", "text_encoder", "image_encoder"):
         if not any((folder / part).glob("*.safetensors")):
             return f"{part}/ has no *.safetensors weights"
-    config = json.loads((folder / "unet" / "config.json").read_text())
+    try:
+        config = json.loads((folder / "unet" / "config.json").read_text())
+    except ValueError as err:
+        return f"unet/config.json is not JSON ({err})"
     absent = [key for key in MULTIVIEW_UNET_KEYS if key not in config]
     if absent:
         return f"unet/config.json lacks {', '.join(absent)} (the published MultiViewUNetModel's keys)"
     weights = next((folder / "unet").glob("*.safetensors"))
-    return architecture_mismatch(meta_shapes(lambda: MultiViewUNetModel(**config)), safetensors_shapes(weights))
+    known = inspect.signature(MultiViewUNetModel.__init__).parameters
+    arguments = {key: value for key, value in config.items() if key in known}  # e.g. LDM's use_checkpoint: unused
+    try:
+        return architecture_mismatch(meta_shapes(lambda: MultiViewUNetModel(**arguments)), safetensors_shapes(weights))
+    except Exception as err:  # an unreadable header or impossible sizes: the user's files are at fault
+        return f"unet/ cannot be read or built ({err})"
 
 
 def find_multiview(flag: Optional[Path], scene_file: Path) -> Path:

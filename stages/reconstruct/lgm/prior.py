@@ -93,7 +93,7 @@ class LearnedPrior:
                   object_id: int) -> Gaussians:
         """The object's Gaussians in the input camera ``K`` from its ``mask`` (H,W bool) of ``photo`` (H,W,3 u8)."""
         views = self.views(object_view(photo, mask, self.view_size))
-        log.info("object %d: LGM on the 4 views at %d px (%s; on a CPU about a minute)", object_id,
+        log.info("object %d: LGM on the 4 views at %d px (%s; on a CPU minutes)", object_id,
                  self.lgm.config.input_size, self.device)
         started = time.perf_counter()
         inputs = lgm_input(views, self.lgm.config.input_size).to(self.device, next(self.lgm.parameters()).dtype)
