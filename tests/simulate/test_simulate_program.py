@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import contextlib
 import io
+import logging
 import math
 import re
 import signal
+import time
 
 import cv2
 import numpy as np
@@ -295,3 +297,52 @@ def test_out_given_as_a_folder_is_refused_up_front(tmp_path):
     code, err = program(tmp_path, JELLY)
     assert code == 2 and "--out" in err and "folder" in err and "Traceback" not in err, err
     assert left_in(tmp_path) == ["trajectories.h5"]
+
+
+def warnings_of(caplog) -> list:
+    return [r.getMessage() for r in caplog.records if r.levelno >= logging.WARNING and r.name.startswith("physmotion")]
+
+
+@pytest.mark.parametrize("scene, scale", [
+    (JELLY.replace("preset: jelly", "preset: jelly, density: 1.0e8"), 1.0),  # SVD failed in the settle's warning
+    (JELLY.replace("size_m: 0.1", "size_m: 1000"), 1e4),  # the schema's largest body
+])
+def test_extreme_bodies_run_or_are_refused_in_one_paragraph(tmp_path, scene, scale):
+    means, object_id = boxes(((-0.05, 0, 0.5), (0.05, 0.1, 0.6)), spacing=0.01)
+    code, err = program(tmp_path, scene + "physics: {duration_s: 0.2, fps: 10, grid: 12}\n", means * scale, object_id)
+    assert "Traceback" not in err
+    if code:
+        refused(code, err, err.split("field '")[1].split("'")[0])
+        assert left_in(tmp_path) == []
+    else:
+        tr = read_artifact(tmp_path / "run" / "trajectories.h5", TrajectoriesArtifact)
+        assert np.isfinite(tr.positions).all()
+
+
+def test_an_absurdly_soft_body_ends_within_the_time_its_log_states(tmp_path, caplog):
+    """Jelly of E = 1e-3 Pa (it cannot carry its weight): the log states the run's substeps before any, and
+    the program ends, in a run or a paragraph, within a minute (it printed nothing for 300 s)."""
+    caplog.set_level(logging.INFO, logger="physmotion")
+    started = time.perf_counter()
+    code, err = program(tmp_path, JELLY.replace("preset: jelly", "preset: jelly, youngs_modulus: 1.0e-3")
+                        + "physics: {duration_s: 0.2, fps: 10, grid: 12}\n")
+    assert time.perf_counter() - started < 60
+    assert "Traceback" not in err and code in (0, 2), err
+    messages = [r.getMessage() for r in caplog.records]
+    assert any("substeps per frame at rest" in m for m in messages[:12]), messages[:12]
+
+
+def test_no_weight_diagnostics_where_there_is_no_weight_or_no_shape_to_hold(tmp_path, caplog):
+    """A sand box at rest warns of no sag beyond its own height, and a jelly in zero gravity of nothing about
+    its weight (it warned of 5818.5 mm of sag for a 189 mm body, and of not resting under its own weight)."""
+    caplog.set_level(logging.INFO, logger="physmotion")
+    physics = "physics: {duration_s: 0.2, fps: 10, grid: 12%s}\n"
+    code, err = program(tmp_path, JELLY.replace("preset: jelly", "preset: sand") + physics % "")
+    assert code == 0, err
+    for message in [r.getMessage() for r in caplog.records]:
+        for sag in re.findall(r"([0-9.]+) mm of sag|sag of up to ([0-9.]+) mm", message):
+            assert max(float(v or 0) for v in sag) < 100, message
+    caplog.clear()
+    code, err = program(tmp_path, JELLY + physics % ", gravity: [0, 0, 0]")
+    assert code == 0, err
+    assert not [m for m in warnings_of(caplog) if "weight" in m or "sag" in m], warnings_of(caplog)
