@@ -166,6 +166,16 @@ def test_a_fixed_region_holds_a_rigid_body_and_a_velocity_region_carries_it(devi
     assert np.max(np.abs(travel[:, :, 1:])) < 1e-6
 
 
+def test_a_zero_velocity_region_holds_a_rigid_body_as_fixed_does(device):
+    """A prescribed velocity of zero on the top fifth of a hanging rigid box holds it as `fixed` does (the
+    "fixed" particles of a rigid body moved 24.6 mm before either held it)."""
+    means, object_id = boxes(((0, 0, 0.5), (0.1, 0.06, 0.54)), spacing=0.01)
+    _, held = run(device, [M.Rigid()], means, object_id, duration_s=0.2, fps=20, grid=16, gravity=[0, G, 0],
+                  ground={"enabled": False},
+                  conditions=[{"type": "velocity", "region": {"box": [0, 0, 0, 1, 0.2, 1]}, "velocity": [0, 0, 0]}])
+    assert np.max(np.abs(held.positions - held.positions[0])) < 1e-6
+
+
 def swing(device, region: dict, seconds: float = 0.03):
     """A rigid bar (10 x 2 x 4 cm) in gravity with no ground, held `fixed` at `region`; physics.dt 0.2 ms keeps
     symplectic Euler's v dt / 2 under 0.1 % of its swing. Returns (its trajectories, the held particles)."""
