@@ -377,8 +377,8 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
             on_solid_base = np.zeros(len(t_in), bool)
         else:
             t_in, t_out, on_solid_base = solid_depths(mask, K, down, size, solid)
-            log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k,
-                     type(solid.solid).__name__, solid.overlap)
+            log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k, solid.solid.kind,
+                     solid.overlap)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
         layer = max(BASE_LAYER * size, 1.5 * float(np.median(t_in)) / K[0, 0])
         front[mask], back[mask], cut = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,

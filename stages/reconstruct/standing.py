@@ -42,8 +42,13 @@ TRACED_SHARE = 0.4
 """... and an end circle whose image traces the outline along this share of its points can be a flat face
 (an upright cylinder's end: 0.43-0.65 of its points; a ball's circles, which touch it at a point or two
 and curve away, 0.31-0.47)."""
-END_SEARCH_PX = 8.0
+END_SEARCH = 0.1
+"""The face of a flat end is looked for within this share of the height seen inside the last slab seen
+(which may be one of the widest circles that fit beyond the face: up to 8 px of 100)."""
 FACE_PX = 1.5
+FACE_RMS_PX = 0.15
+"""... and it is a face where that half circle's image lies this close to the outline (rms): an upright
+cylinder's 0.07-0.12 px; a ball's circles, whose images are flatter than its outline, 0.19-0.42."""
 FACE_SPAN = 0.3
 """A flat face's height and radius are refined together, within FACE_PX of the slab it ends on and 4 % of
 the radius a line through the profile over FACE_SPAN of its height gives there."""
@@ -140,6 +145,7 @@ class Revolution:
     axis_x: float
     edges: np.ndarray
     radii: np.ndarray
+    kind = "body of revolution"
 
     @property
     def extent(self) -> float:
@@ -288,15 +294,16 @@ def revolution(view: GravityView) -> Optional[Revolution]:
     for end, outward in ((top, -1), (bottom, 1)):
         # the face, if any: near the end seen, a circle that traces the outline where the body does not narrow
         inward = outward * (heights[end] - heights)
-        near = np.flatnonzero((inward >= -pixel) & (inward <= END_SEARCH_PX * pixel) & (radii > 0))
+        near = np.flatnonzero((inward >= -pixel) & (inward <= END_SEARCH * (heights[bottom] - heights[top]))
+                              & (radii > 0))
         widest_before = np.array([radii[k - outward * np.arange(span + 1)].max() if 0 <= k - outward * span < len(radii)
                                   else np.inf for k in near])
         near = near[radii[near] >= NARROW_SHARE * widest_before]
         shares = [traced_share(view, np.array([axis_x, heights[k], 1.0]), radii[k]) for k in near]
+        face = None
         if shares and max(shares) >= TRACED_SHARE:
-            ends.append(flat_end(view, axis_x, edges, radii, int(near[int(np.argmax(shares))]), outward, pixel))
-        else:
-            ends.append(dome_end(edges, radii, end, outward))
+            face, misfit = flat_end(view, axis_x, edges, radii, int(near[int(np.argmax(shares))]), outward, pixel)
+        ends.append((face, None) if face is not None and misfit <= FACE_RMS_PX else dome_end(edges, radii, end, outward))
     (top_y, top_dome), (bottom_y, bottom_dome) = ends
     edges = np.linspace(top_y, bottom_y, SLICES + 1)
     heights = 0.5 * (edges[:-1] + edges[1:])
@@ -322,11 +329,12 @@ def seen_ends(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.nda
 
 
 def flat_end(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray, end: int, outward: int,
-             pixel: float) -> tuple[float, None]:
+             pixel: float) -> tuple[float, float]:
     """A flat end near slab `end` (outward -1 up, +1 down): past it as long as the body does not narrow (by a
     quarter of a pixel), then to the height where the half of the face's circle that faces the outline lies
     on it best (FACE_PX; least squares of the signed distance, the radius fitted with it: one slab's
-    radius is a fifth of a pixel off, and the face's height with it). Returns the face's height, no dome."""
+    radius is a fifth of a pixel off, and the face's height with it). Returns the face's height and the rms
+    distance (px) of that half circle's image from the outline."""
     focal = view.K[0, 0]
     k = end
     while 0 <= k + outward < len(radii) and radii[k + outward] >= radii[end] - 0.25 / focal:
@@ -343,7 +351,8 @@ def flat_end(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndar
     v = view.project(points)[..., 1] - view.project(np.repeat(centres, len(sizes), axis=0))[:, None, 1]
     facing = outward * v > 0  # the half beyond the centre's image, towards the end
     misfit = np.sum(np.where(facing, view.sdf_at(points), 0.0) ** 2, axis=1) / np.maximum(facing.sum(1), 1)
-    return float(heights[int(np.argmin(misfit)) // len(sizes)]), None
+    best = int(np.argmin(misfit))
+    return float(heights[best // len(sizes)]), math.sqrt(float(misfit[best]))
 
 
 def dome_end(edges: np.ndarray, radii: np.ndarray, end: int, outward: int):
@@ -376,6 +385,7 @@ class UprightBox:
     width: float
     depth: float
     height: float
+    kind = "upright box"
 
     @property
     def extent(self) -> float:
