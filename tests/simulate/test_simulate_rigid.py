@@ -121,7 +121,7 @@ def test_a_rigid_body_in_zero_gravity_with_no_condition_stays_still(device):
     means, object_id = boxes(((0, 0, 0.5), (0.1, 0.06, 0.54)), spacing=0.01)
     _, tr = run(device, [M.Rigid()], means, object_id, duration_s=0.2, fps=20, grid=16, gravity=[0, 0, 0])
     assert np.max(np.abs(tr.positions - tr.positions[0])) < 1e-6
-    np.testing.assert_array_equal(tr.substeps[1:], 1)
+    assert np.all(tr.substeps[1:] <= 1)  # a frame each, or none where the run copies a frame at rest
     assert np.max(tr.kinetic_energy) < 1e-12
 
 
