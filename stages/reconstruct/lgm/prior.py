@@ -12,6 +12,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from schemas import InputError
+
 from ..lift import Gaussians
 from .loading import find_lgm, find_multiview, load_lgm, load_multiview
 from .multiview import MultiViewModels, sample_views
@@ -28,6 +30,8 @@ IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
 DIFFUSION_STEPS = 30
 GUIDANCE = 5.0
+MIN_GAUSSIANS = 4
+"""Fewer placed Gaussians than this enclose no volume."""
 
 
 def object_view(photo: np.ndarray, mask: np.ndarray, size: int, border: float = BORDER) -> np.ndarray:
@@ -102,14 +106,19 @@ class LearnedPrior:
         return place(cloud, mask, K, size_m, front, object_id)
 
 
-def learned_objects(prior: LearnedPrior, photo: np.ndarray, labels: np.ndarray, fronts: list[np.ndarray],
-                    K: np.ndarray, sizes_m: list[float], budget: int) -> tuple[Gaussians, np.ndarray, np.ndarray]:
+def learned_objects(prior: LearnedPrior, scene_file: Path, photo: np.ndarray, labels: np.ndarray,
+                    fronts: list[np.ndarray], K: np.ndarray, sizes_m: list[float],
+                    budget: int) -> tuple[Gaussians, np.ndarray, np.ndarray]:
     """Every object's learned Gaussians in the camera ``K``: (Gaussians, (G,) bool which the photograph sees,
     (objects,) m^3 each encloses). ``fronts``: the prior's camera-space front depths (H,W) per object; at most
     ``budget`` Gaussians in all (a fixed random subset of each object's where more)."""
     parts, volumes = [], []
     for k, (front, size_m) in enumerate(zip(fronts, sizes_m)):
         placed = prior.gaussians(photo, labels == k + 1, K, size_m, front, k)
+        if len(placed) < MIN_GAUSSIANS:
+            raise InputError(scene_file, f"objects[{k}]", f"LGM left {len(placed)} Gaussians of the object on its "
+                             "mask (transparent, or outside the mask once placed)", "check the object's mask or box; "
+                             "or use reconstruct.prior: symmetric")
         volumes.append(enclosed_volume(placed.means))
         log.info("object %d: %d learned Gaussians placed, enclosing %.4g m^3", k, len(placed), volumes[-1])
         parts.append(placed)
