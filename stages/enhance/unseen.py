@@ -32,7 +32,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import STILL_PX, normalised_blur, sample_at
-from .relight import Relighting, Shading, smooth_normals, to_linear, to_srgb
+from .relight import NORMAL_SMOOTHING, Relighting, Shading, smooth_normals, to_linear, to_srgb
 
 log = logging.getLogger("physmotion.enhance.unseen")
 
@@ -150,16 +150,24 @@ def mirrored_source(uv: np.ndarray, front_distance: np.ndarray, rays: np.ndarray
     return p.astype(np.float32)
 
 
+@dataclass(frozen=True)
 class Albedo:
     """The photograph as albedo (linear light over the fitted shading) at output resolution, continued
-    inwards over the pixels it records poorly; and how well it records each of them.
+    inwards over the pixels it records poorly; and how well it records each of them. Use :meth:`fit`.
 
-    Use :meth:`fit`.
+    shading_rest (h, w): the shading each photograph pixel was taken under (1 without a light);
+    recorded (h, w) in [0, 1]: how well the pixel records its surface's colour; continued (h, w, 3):
+    the albedo, continued over the objects and a margin; inside (h, w): 1 on that region;
+    facing_rest (h, w): the facing cosine at rest (NaN off the objects); coverage (h, w) in [0, 1]:
+    how purely the pixel shows an object.
     """
 
-    def __init__(self, photo_linear, shading_rest, recorded, continued, inside, facing_rest, coverage):
-        self.photo_linear, self.shading_rest, self.coverage = photo_linear, shading_rest, coverage
-        self.recorded, self.continued, self.inside, self.facing_rest = recorded, continued, inside, facing_rest
+    shading_rest: np.ndarray
+    recorded: np.ndarray
+    continued: np.ndarray
+    inside: np.ndarray
+    facing_rest: np.ndarray
+    coverage: np.ndarray
 
     @classmethod
     def fit(cls, photo: np.ndarray, mask: np.ndarray, rest_normals: np.ndarray, rays: np.ndarray,
@@ -187,8 +195,7 @@ class Albedo:
         continued = continue_inwards(albedo, recorded > 0.5, inside)
         log.info("unseen surfaces: %.0f%% of the objects' pixels record their colour well, the rest is continued",
                  100 * float((recorded > 0.5)[mask > 0.5].mean()) if (mask > 0.5).any() else 0.0)
-        return cls(photo_linear, shading_rest, recorded, continued, inside.astype(np.float32), facing_rest,
-                   mask.astype(np.float32))
+        return cls(shading_rest, recorded, continued, inside.astype(np.float32), facing_rest, mask.astype(np.float32))
 
 
 def continue_inwards(values: np.ndarray, known: np.ndarray, region: np.ndarray) -> np.ndarray:
@@ -235,7 +242,7 @@ class Continuation:
         h, w = coarse.alpha.shape[1:]
         relighting = Relighting.fit(coarse, photo) if relight else None
         on = coarse.alpha[0] > 0.5
-        sigma = relighting.sigma_px if relighting else max(1.0, 0.03 * float(np.sqrt(max(on.sum(), 1))))
+        sigma = relighting.sigma_px if relighting else max(1.0, NORMAL_SMOOTHING * float(np.sqrt(max(on.sum(), 1))))
         rest_normals = relighting.rest_normals if relighting else smooth_normals(coarse.normal[0], coarse.alpha[0], sigma)
         rays = view_rays(coarse.K, h, w)
         albedo = Albedo.fit(photo, coverage, rest_normals, rays, relighting.shading if relighting else None)
