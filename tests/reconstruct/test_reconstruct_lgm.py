@@ -131,19 +131,28 @@ def test_plucker_embedding_matches_float64():
 SPHERE_RADIUS = 0.5  # in LGM's cube
 
 
-def sphere_splatter(size: int) -> torch.Tensor:
-    """Raw splatter images (4,14,size,size) of a sphere about the origin: each pixel's Gaussian where its ray first
-    meets the sphere (opaque), transparent where the ray misses; standard deviation 0.01, grey."""
+def first_hits(origin: np.ndarray, directions: np.ndarray, spheres: list) -> tuple[np.ndarray, np.ndarray]:
+    """Where rays from ``origin`` (3,) along ``directions`` (...,3) first meet the spheres [(centre, radius)]:
+    distance along the ray (..., inf on a miss) and the point (...,3)."""
+    nearest = np.full(directions.shape[:-1], np.inf)
+    for centre, radius in spheres:
+        rel = origin - np.asarray(centre)
+        along = -(directions @ rel)
+        closest = rel @ rel - along ** 2
+        t = along - np.sqrt(np.maximum(radius ** 2 - closest, 0))
+        nearest = np.where((closest < radius ** 2) & (t > 0) & (t < nearest), t, nearest)
+    return nearest, origin + np.where(np.isfinite(nearest), nearest, 0)[..., None] * directions
+
+
+def sphere_splatter(size: int, spheres: list = (((0.0, 0.0, 0.0), SPHERE_RADIUS),)) -> torch.Tensor:
+    """Raw splatter images (4,14,size,size) of spheres in LGM's cube: each pixel's Gaussian where its ray first
+    meets them (opaque), transparent where the ray misses; standard deviation 0.01, grey."""
     raw = torch.zeros(4, 14, size, size, dtype=torch.float64)
     for v, azimuth in enumerate(AZIMUTHS_DEG):
         centre, directions = float64_rays(azimuth, size)
-        along = -(directions @ centre)
-        closest = np.sum(centre ** 2) - along ** 2
-        hit = closest < SPHERE_RADIUS ** 2
-        t = along - np.sqrt(np.maximum(SPHERE_RADIUS ** 2 - closest, 0))
-        points = np.where(hit[..., None], centre + t[..., None] * directions, 0.0)
+        distance, points = first_hits(centre, directions, list(spheres))
         raw[v, 0:3] = torch.from_numpy(points.transpose(2, 0, 1))
-        raw[v, 3] = torch.from_numpy(np.where(hit, 8.0, -20.0))
+        raw[v, 3] = torch.from_numpy(np.where(np.isfinite(distance), 8.0, -20.0))
         raw[v, 4:7] = math.log(math.expm1(0.1))  # 0.1 softplus(x) = 0.01
         raw[v, 7] = 1.0
     return raw
@@ -165,27 +174,27 @@ def test_splatter_pixels_land_on_their_rays():
     assert len(prune(cloud)) == opaque.sum()
 
 
-def sphere_photograph(radius: float, distance: float, size: int, fov_deg: float = 40.0):
-    """K, mask and camera-space front depth (NaN off it) of a sphere on the optical axis, by ray casting."""
+def sphere_photograph(spheres: list, size: int, fov_deg: float = 40.0):
+    """K, mask and camera-space front depth (NaN off it) of spheres [(centre, radius)] in the camera frame."""
     K = intrinsics_from_fov(fov_deg, size, size)
     rays = pixel_rays(K, size, size)
-    along = rays[..., 2] * distance
-    closest = distance ** 2 - along ** 2
-    mask = closest < radius ** 2
-    t = along - np.sqrt(np.maximum(radius ** 2 - closest, 0))
-    return K, mask, np.where(mask, t * rays[..., 2], np.nan)
+    distance, _ = first_hits(np.zeros(3), rays, spheres)
+    mask = np.isfinite(distance)
+    return K, mask, np.where(mask, distance * rays[..., 2], np.nan)
+
+
+def render_alpha(placed, K: np.ndarray, size: int) -> np.ndarray:
+    as_tensor = lambda a: torch.tensor(a, dtype=torch.float32)  # noqa: E731
+    return splat.rasterize(as_tensor(placed.means), as_tensor(placed.opacities), as_tensor(placed.colors),
+                           splat.Camera(K, np.eye(4), size, size), scales=as_tensor(placed.scales),
+                           rotations=as_tensor(placed.rotations)).alpha.numpy()
 
 
 def test_placed_sphere_renders_on_its_mask_at_the_prior_depth():
     radius, distance, size = 0.1, 0.6, 128
-    K, mask, front = sphere_photograph(radius, distance, size)
+    K, mask, front = sphere_photograph([((0, 0, distance), radius)], size)
     placed = place(prune(decode(sphere_splatter(32))), mask, K, 2 * radius, front)
-    means = torch.tensor(placed.means, dtype=torch.float32)
-    render = splat.rasterize(means, torch.tensor(placed.opacities, dtype=torch.float32),
-                             torch.tensor(placed.colors, dtype=torch.float32), splat.Camera(K, np.eye(4), size, size),
-                             scales=torch.tensor(placed.scales, dtype=torch.float32),
-                             rotations=torch.tensor(placed.rotations, dtype=torch.float32))
-    covered = render.alpha.numpy() > 0.5
+    covered = render_alpha(placed, K, size) > 0.5
     # the silhouette: all but a rim of Gaussian footprint and the poles, which views at elevation 0 graze
     assert (covered & mask).sum() / (covered | mask).sum() > 0.85
     np.testing.assert_allclose(np.argwhere(covered).mean(0), np.argwhere(mask).mean(0), atol=0.5)
@@ -197,6 +206,20 @@ def test_placed_sphere_renders_on_its_mask_at_the_prior_depth():
     assert both.sum() > 0.8 * inside.sum()
     assert np.median(np.abs(zbuffer[both] - truth[both])) < 0.03 * radius
     np.testing.assert_allclose(placed.means.mean(0), [0, 0, distance], atol=0.05 * radius)
+
+
+def test_placement_keeps_left_right_and_up_down():
+    """A big ball at the photograph's right and a small one up left: LGM's frame (y up, z towards view 0) turned
+    into the camera's (y down, z away) puts each where the photograph has it, not mirrored."""
+    big, small = ((0.05, 0.01, 0.6), 0.05), ((-0.06, -0.04, 0.62), 0.025)
+    K, mask, front = sphere_photograph([big, small], 96)
+    to_cube = lambda centre: (5 * centre[0], -5 * centre[1], -5 * (centre[2] - 0.6))  # noqa: E731
+    cloud = prune(decode(sphere_splatter(32, [(to_cube(c), 5 * r) for c, r in (big, small)])))
+    placed = place(cloud, mask, K, 0.185, front)  # the pair's largest extent, along x: 0.05 + 0.05 + 0.06 + 0.025
+    covered = render_alpha(placed, K, 96) > 0.5
+    assert (covered & mask).sum() / (covered | mask).sum() > 0.8
+    mirrored = covered[:, ::-1], covered[::-1, :]
+    assert all((m & mask).sum() / (m | mask).sum() < 0.5 for m in mirrored)
 
 
 def test_enclosed_volume_of_sampled_surfaces():
