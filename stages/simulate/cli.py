@@ -34,8 +34,9 @@ and regions read along gravity (x right, y down, z away; `frame: camera` for the
 The ground is the plane normal to gravity on which the objects stand on their centres of mass,
 and the bodies settle into their own weight before t = 0, so that with no condition nothing
 moves; the grid follows the bodies, and only the ground and physics.walls stop them. Substeps
-follow a CFL bound unless physics.dt is set; a run above physics.max_substeps_per_frame is
-refused before it starts. Writes trajectories.h5 (positions and deformation gradients of every
+follow a CFL bound unless physics.dt is set; a run above physics.max_substeps_per_frame, or a
+physics.dt above the CFL bound, is refused before it starts, and a run that blows up or collapses
+a body onto a point writes nothing. Writes trajectories.h5 (positions and deformation gradients of every
 particle, per-frame energies and momenta) and setup.png beside it (the
 objects, ground, regions and arrows over the photograph: check it before a long run)."""
 
