@@ -94,7 +94,8 @@ def cell_size(points_sim: np.ndarray, cells: int, *, ground: bool, walls: bool) 
     return float(max((hi - lo) + low + high)) / cells
 
 
-def fit_grid(rest_sim: np.ndarray, dx: float, *, ground_y: float | None, walls: bool) -> Grid:
+def fit_grid(rest_sim: np.ndarray, dx: float, *, ground_y: float | None, walls: bool,
+             centre: np.ndarray | None = None) -> Grid:
     """Grid of `dx` m cells over the rest particles with room for them to deform (`cell_size`).
 
     Args:
@@ -103,12 +104,18 @@ def fit_grid(rest_sim: np.ndarray, dx: float, *, ground_y: float | None, walls: 
         ground_y: height of the ground plane (simulation frame, m; the lowest rest point), or None
             without a ground.
         walls: close the domain tightly around the objects.
+        centre: (3,) m, a point the node planes across the ground pass through (the fill lattice's
+            centre, fill.fill_object), or None.
 
-    The ground lies exactly on a node plane.
+    The ground lies exactly on a node plane. Node planes through the fill's centre make the nodes
+    under a mirror-symmetric body mirror-symmetric too: its contact with the ground has no lever about
+    its centre, and a ball bouncing straight up on slip ground gathers no spin from the grid.
     """
     lo, hi = rest_sim.min(axis=0), rest_sim.max(axis=0)
     margin_lo, margin_hi = _margins(float(max(hi - lo)), ground_y is not None, walls)
     origin = lo - margin_lo - BOUNDARY_NODES * dx
+    if centre is not None:
+        origin = centre - np.ceil((centre - origin) / dx - 1e-9) * dx
     if ground_y is not None:  # the ground on a node plane, the points below it (its contact patch) on the grid
         origin[1] = ground_y - (BOUNDARY_NODES + math.ceil((ground_y - lo[1]) / dx - 1e-9)) * dx
     shape = np.ceil((hi + margin_hi - origin) / dx - 1e-9).astype(int) + BOUNDARY_NODES + 1

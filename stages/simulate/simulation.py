@@ -37,6 +37,10 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
+# A frame in which no particle moved more than this share of a cell, nor faster than it a frame, and
+# no more than the frame before, is at rest: while no condition acts, the next frame is the same
+# (docs/decisions/0021-frames-at-rest.md).
+QUIET_CELLS = 0.05
 # The settle says how far it has come this often, in seconds.
 SETTLE_LOG_EVERY_S = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
@@ -112,7 +116,10 @@ class Simulation:
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
         # the ground: the plane, normal to gravity, through the objects' lowest point; they stand on their base
         self.ground_y = float(rest_sim[:, 1].min()) if ground.enabled else None
-        self.grid = domain.fit_grid(rest_sim, dx, ground_y=self.ground_y, walls=physics.walls)
+        largest = np.argmax(np.bincount(object_id))
+        box = means_sim[object_id == largest]
+        self.grid = domain.fit_grid(rest_sim, dx, ground_y=self.ground_y, walls=physics.walls,
+                                    centre=0.5 * (box.min(axis=0) + box.max(axis=0)))
         self.ground = (Ground(GROUND_TYPES[ground.type], ground.friction, self.ground_y)
                        if ground.enabled else Ground(GROUND_NONE))
         # potential energy is measured from the ground, else from the grid's starting floor
@@ -396,7 +403,21 @@ class Simulation:
         self.settled = self.settle()
         self._record(0, positions, F, diag)
         t, started = 0.0, time.perf_counter()
+        asleep = False
         for f in range(1, T):
+            if self._at_rest(f - 1, positions, diag, times):
+                if not asleep:
+                    log.info("frame %d/%d: at rest and nothing acts until t = %.3f s: frames copy the last one, no "
+                             "substeps", f, T - 1, times[f])
+                asleep = True
+                positions[f], F[f] = positions[f - 1], F[f - 1]
+                for k, values in diag.items():
+                    values[f] = 0 if k == "substeps" else values[f - 1]
+                t = times[f]
+                continue
+            if asleep:
+                log.info("frame %d/%d: a condition acts, the simulation goes on", f, T - 1)
+                asleep = False
             dt = self.substep_size(float(diag["max_speed"][f - 1]))
             n = max(1, math.ceil((times[f] - t) / dt - 1e-9))
             h = (times[f] - t) / n
@@ -425,6 +446,39 @@ class Simulation:
             object_id=self.object_id, is_gaussian=np.arange(P) < G, positions=positions, F=F, time_s=times,
             lattice_spacing=float(self.spacing), fps=float(self.physics.fps),
             duration_s=float(self.physics.duration_s), **diag)
+
+    def _at_rest(self, f: int, positions: np.ndarray, diag: dict, times: np.ndarray) -> bool:
+        """Whether the world of frame f is at rest and stays so over the next frame: every object stands on the
+        ground (within a cell of it) or is held by a fixed condition, or there is no gravity; over frame f no
+        particle moved more than QUIET_CELLS of a cell, nor more than over the frame before (nothing is
+        setting out), none is faster than QUIET_CELLS of a cell a frame; and no condition acts, starts or
+        ends between frame f - 1 and frame f + 1 (a fixed one holds still what it holds). A body slow at the
+        top of its flight is not at rest: nothing carries it."""
+        if f < 2:
+            return False
+        if np.linalg.norm(self.gravity_world) > 0:
+            carried = np.zeros(len(self.materials), bool)
+            carried[self.object_id[self.conditions.fixed_at_start()]] = True
+            if self.ground_y is not None:
+                height = positions[f] @ self.Q[1] - self.ground_y  # simulation frame's y of each particle
+                lowest = np.full(len(self.materials), np.inf)
+                np.minimum.at(lowest, self.object_id, height)
+                carried |= lowest <= self.grid.dx
+            if not carried.all():
+                return False
+        since, until = times[f - 1], times[f + 1]
+        for c in self.physics.conditions:
+            edges = [c.start_s] + ([] if getattr(c, "end_s", None) is None else [c.end_s])
+            if any(since < e <= until for e in edges):
+                return False
+            if c.type not in ("fixed", "impulse") and c.start_s <= until and (c.end_s is None or c.end_s > since):
+                return False
+        quiet = QUIET_CELLS * self.grid.dx
+        if diag["max_speed"][f] > quiet * self.physics.fps:
+            return False
+        moved = float(np.max(np.abs(positions[f] - positions[f - 1]), initial=0.0))
+        before = float(np.max(np.abs(positions[f - 1] - positions[f - 2]), initial=0.0))
+        return moved <= quiet and moved <= before
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:
         """Store frame f: world positions, world F of every particle, and the diagnostics."""
