@@ -21,7 +21,8 @@ log = logging.getLogger("physmotion.simulate")
 
 # An object whose particles all lie within this share of its rest extent, or more than half of whose mass has
 # a deformation gradient of det F below COLLAPSED_DET (crushed a thousandfold, or inverted), has collapsed:
-# no material does that, only an impact the explicit solver cannot resolve (piled against walls and ground).
+# an impact faster than its elastic waves piled it against walls and ground (the solver clamps particles onto
+# them), or a material far too soft for its weight was crushed flat; neither is a body the run resolves.
 COLLAPSED_EXTENT = 1e-2
 COLLAPSED_DET = 1e-3
 
@@ -92,7 +93,8 @@ def refuse_collapsed(trajectories: TrajectoriesArtifact, scene) -> None:
             problem = (f"at frame {f} (t = {trajectories.time_s[f]:.3f} s) object {k} ({obj.material.preset}) has "
                        f"collapsed: its particles span {1e3 * extent:.3g} mm of its {1e3 * size:.3g} mm and "
                        f"{100 * masses[crushed].sum() / masses.sum():.0f} % of its mass is crushed or inverted "
-                       "(det F below 1e-3), which no material does")
+                       "(det F below 1e-3): crushed to a sheet or a point, it is no longer a body the "
+                       "simulation resolves")
             speed = wave_speed(obj.material)
             pushes = [(float(np.linalg.norm(c.velocity)), i) for i, c in enumerate(scene.physics.conditions)
                       if c.type in ("impulse", "velocity") and c.object == k]
@@ -105,7 +107,8 @@ def refuse_collapsed(trajectories: TrajectoriesArtifact, scene) -> None:
                                  f"give it a speed below {0.5 * speed:.2g} m/s, or a stiffer material "
                                  f"(objects[{k}].material.youngs_modulus)"
                                  + (", or turn physics.walls off" if scene.physics.walls else ""))
-            raise InputError(scene.file, f"objects[{k}].material", problem,
-                             f"make objects[{k}].material stiffer (youngs_modulus) or set a smaller physics.dt")
+            raise InputError(scene.file, f"objects[{k}].material", f"{problem}: its weight or the conditions "
+                             "crush it", f"make objects[{k}].material stiffer (youngs_modulus) or lighter (density), "
+                             "or soften the conditions acting on it")
 def main(argv=None) -> None:
     run_main(simulate, build_parser(), argv)
