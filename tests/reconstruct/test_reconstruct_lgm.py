@@ -18,13 +18,13 @@ from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
 from stages.reconstruct.lgm import prior as prior_module
 from stages.reconstruct.lgm.loading import (PUBLISHED_MULTIVIEW_UNET, find_lgm, find_multiview, load_lgm,
                                             load_multiview, meta_shapes)
-from stages.reconstruct.lgm.multiview import MultiViewUNetModel, sample_views
+from stages.reconstruct.lgm.multiview import MultiViewUNetModel, frame_cameras, sample_views
 from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place
 from stages.reconstruct.lgm.rays import AZIMUTHS_DEG, CAMERA_RADIUS, FOVY_DEG, plucker_embedding, view_poses
 from stages.reconstruct.lgm.splatter import decode, prune
-from stages.reconstruct.lgm.unet import LGM, LGMConfig
+from stages.reconstruct.lgm.unet import LGM, LGMConfig, MultiViewAttention
 from testing.photographs import Capsule, write_scene
-from testing.tiny_lgm import TINY_LGM, save_tiny_lgm, save_tiny_multiview
+from testing.tiny_lgm import TINY_LGM, TINY_MULTIVIEW_UNET, save_tiny_lgm, save_tiny_multiview
 
 PUBLISHED = Path(__file__).parent / "lgm_published"
 
@@ -81,6 +81,32 @@ def test_tiny_models_round_trip_through_the_loaders(tiny, tmp_path):
     image[8:24, 10:22] = (0.8, 0.2, 0.1)
     views = sample_views(models, image, steps=2, size=32)
     assert views.shape == (4, 32, 32, 3) and views.min() >= 0 and views.max() <= 1
+
+
+def test_views_see_each_other_through_attention_only():
+    """Changing one view changes the others' output through the cross-view attention, and not without it."""
+    torch.manual_seed(0)
+    lgm = LGM(TINY_LGM).eval()
+    inputs = torch.randn(1, 4, 9, 32, 32)
+    changed = inputs.clone()
+    changed[0, 3] += 1
+    with torch.no_grad():
+        assert (lgm(changed)[0, 0] - lgm(inputs)[0, 0]).abs().max() > 1e-3
+        for block in lgm.modules():
+            if isinstance(block, MultiViewAttention):
+                block.views = 1  # each view attends to itself only
+        assert torch.equal(lgm(changed)[0, 0], lgm(inputs)[0, 0])
+    unet = MultiViewUNetModel(**TINY_MULTIVIEW_UNET).eval()
+    latents, context = torch.randn(5, 4, 16, 16), torch.randn(5, 3, 32)
+    tokens, cameras = torch.randn(5, 6, 32), frame_cameras()
+    with torch.no_grad():
+        run = lambda x, frames, cams=cameras: unet(x, torch.full((5,), 500), context, cams, frames,  # noqa: E731
+                                                   tokens, x[frames - 1::frames])
+        moved = latents.clone()
+        moved[2] += 1
+        assert (run(moved, 5)[0] - run(latents, 5)[0]).abs().max() > 1e-4
+        assert torch.equal(run(moved, 1)[0], run(latents, 1)[0])  # one frame per object: nothing crosses
+        assert (run(latents, 5, cameras.roll(1, 0))[0] - run(latents, 5)[0]).abs().max() > 1e-4
 
 
 def test_a_missing_or_partial_model_folder_says_where_and_how(tiny, tmp_path):

@@ -20,7 +20,6 @@ has zero image tokens and a zero image latent) and returns the four views.
 """
 from __future__ import annotations
 
-import logging
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, Optional
@@ -33,8 +32,6 @@ from diffusers.configuration_utils import register_to_config
 from torch import nn
 
 from .rays import AZIMUTHS_DEG, ELEVATION_DEG, orbit_pose
-
-log = logging.getLogger("physmotion.reconstruct")
 
 INPUT_VIEW_FRAME = 1
 """ImageDream's frames sit at azimuths 0, 90, 180, 270 of its own frame; the one at 90 faces the photograph, so
