@@ -23,6 +23,7 @@ import warp as wp
 from schemas import InputError
 
 from .domain import condition_frame
+from .state import Particles
 
 
 def region_members(region, positions: np.ndarray) -> np.ndarray:
@@ -39,18 +40,19 @@ def region_members(region, positions: np.ndarray) -> np.ndarray:
 
 
 @wp.kernel
-def add_velocity(members: wp.array(dtype=wp.int32), dv: wp.vec3, v: wp.array(dtype=wp.vec3)):
+def add_velocity(members: wp.array(dtype=wp.int32), dv: wp.vec3, particles: Particles):
+    """v_p += dv (m/s) for the region's particles (members, indices)."""
     p = members[wp.tid()]
-    v[p] = v[p] + dv
+    particles.v[p] = particles.v[p] + dv
 
 
 @wp.kernel
-def region_moments(members: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
-                   ref: wp.vec3, moments: wp.array(dtype=float)):
+def region_moments(members: wp.array(dtype=wp.int32), particles: Particles, ref: wp.vec3,
+                   moments: wp.array(dtype=float)):
     """Accumulate M, sum m r (3) and sum m r r^T (6) with r = x - ref into moments[0:10]."""
     p = members[wp.tid()]
-    m = mass[p]
-    r = x[p] - ref
+    m = particles.mass[p]
+    r = particles.x[p] - ref
     wp.atomic_add(moments, 0, m)
     for a in range(3):
         wp.atomic_add(moments, 1 + a, m * r[a])
@@ -63,8 +65,8 @@ def region_moments(members: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3)
 
 
 @wp.kernel
-def add_torque_forces(members: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float),
-                      ref: wp.vec3, moments: wp.array(dtype=float), torque: wp.vec3, force: wp.array(dtype=wp.vec3)):
+def add_torque_forces(members: wp.array(dtype=wp.int32), particles: Particles, ref: wp.vec3,
+                      moments: wp.array(dtype=float), torque: wp.vec3):
     """f_p += m_p alpha x (x_p - c) with alpha = I_c^-1 tau, I_c the region's inertia about its centre c."""
     p = members[wp.tid()]
     M = moments[0]
@@ -74,7 +76,7 @@ def add_torque_forces(members: wp.array(dtype=wp.int32), x: wp.array(dtype=wp.ve
                  moments[6]) - M * wp.outer(s, s)
     inertia = wp.diag(wp.vec3(wp.trace(S))) - S
     alpha = wp.inverse(inertia) * torque
-    force[p] = force[p] + mass[p] * wp.cross(alpha, x[p] - (ref + s))
+    particles.force[p] = particles.force[p] + particles.mass[p] * wp.cross(alpha, particles.x[p] - (ref + s))
 
 
 def inertia_about_centre(points: np.ndarray, masses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -190,7 +192,7 @@ class Conditions:
             c = item.condition
             if c.type == "impulse" and i not in self._applied_impulses and t >= c.start_s:
                 wp.launch(add_velocity, dim=len(item.members), device=self.device,
-                          inputs=[item.members_wp, item.sim(c.velocity), solver.v])
+                          inputs=[item.members_wp, item.sim(c.velocity), solver.particles])
                 self._applied_impulses.add(i)
         active = tuple(i for i, item in enumerate(self.items)
                        if item.condition.type != "impulse" and self._in_window(item.condition, t))
@@ -203,10 +205,10 @@ class Conditions:
             for item in torques:
                 self._moments.zero_()
                 wp.launch(region_moments, dim=len(item.members), device=self.device,
-                          inputs=[item.members_wp, solver.x, solver.mass, item.rest_centre, self._moments])
+                          inputs=[item.members_wp, solver.particles, item.rest_centre, self._moments])
                 wp.launch(add_torque_forces, dim=len(item.members), device=self.device,
-                          inputs=[item.members_wp, solver.x, solver.mass, item.rest_centre, self._moments,
-                                  item.sim(item.condition.torque), solver.force])
+                          inputs=[item.members_wp, solver.particles, item.rest_centre, self._moments,
+                                  item.sim(item.condition.torque)])
 
     def _upload_windows(self, active: tuple, solver) -> None:
         """Rebuild prescribed velocities and constant forces when a window opens or closes."""
