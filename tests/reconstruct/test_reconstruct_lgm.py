@@ -19,7 +19,7 @@ from stages.reconstruct.lgm import prior as prior_module
 from stages.reconstruct.lgm.loading import (PUBLISHED_MULTIVIEW_UNET, find_lgm, find_multiview, load_lgm,
                                             load_multiview, meta_shapes)
 from stages.reconstruct.lgm.multiview import MultiViewUNetModel, frame_cameras, sample_views
-from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place
+from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place, seen_from_camera
 from stages.reconstruct.lgm.rays import AZIMUTHS_DEG, CAMERA_RADIUS, FOVY_DEG, plucker_embedding, view_poses
 from stages.reconstruct.lgm.splatter import decode, prune
 from stages.reconstruct.lgm.unet import LGM, LGMConfig, MultiViewAttention
@@ -232,6 +232,10 @@ def test_placed_sphere_renders_on_its_mask_at_the_prior_depth():
     assert both.sum() > 0.8 * inside.sum()
     assert np.median(np.abs(zbuffer[both] - truth[both])) < 0.03 * radius
     np.testing.assert_allclose(placed.means.mean(0), [0, 0, distance], atol=0.05 * radius)
+    # the photograph sees the near cap: within 3 % of size_m behind the nearest Gaussian of its pixel
+    seen = seen_from_camera(placed, K, mask, 2 * radius)
+    assert 0.2 < seen.mean() < 0.6
+    assert placed.means[seen, 2].max() < distance and placed.means[~seen, 2].min() > distance - radius
 
 
 def test_placement_keeps_left_right_and_up_down():

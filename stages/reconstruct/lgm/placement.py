@@ -13,6 +13,8 @@ mask contradict the photograph and are dropped.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
@@ -27,6 +29,8 @@ CARVE_MARGIN = 0.02
 """The mask grows by this share of its larger bounding-box side (at least one pixel) before carving."""
 FRONT_LAYER = 0.03
 """A Gaussian within this share of size_m behind the nearest one in its pixel counts as seen."""
+GAUSSIANS_PER_PIXEL = 8
+"""Gaussians per object pixel when telling the seen ones: about half of them on the near side."""
 VOLUME_CELLS = 48
 """Cells along the largest extent of the occupancy grid that measures the enclosed volume, at most."""
 NEIGHBOURS = 3
@@ -81,9 +85,14 @@ def place(cloud: SplatterGaussians, mask: np.ndarray, K: np.ndarray, size_m: flo
                      cloud.colors[keep], np.full(int(keep.sum()), object_id))
 
 
-def seen_from_camera(gaussians: Gaussians, K: np.ndarray, shape: tuple[int, int], size_m: float) -> np.ndarray:
-    """(G,) bool: the Gaussians within FRONT_LAYER size_m of the nearest one in their pixel of the camera ``K``."""
-    zbuffer, index = nearest_depth(gaussians.means, K, shape)
+def seen_from_camera(gaussians: Gaussians, K: np.ndarray, mask: np.ndarray, size_m: float) -> np.ndarray:
+    """(G,) bool: the Gaussians within FRONT_LAYER size_m of the nearest one in their pixel of the camera ``K``,
+    on pixels coarsened until the object's ``mask`` (H,W bool) holds GAUSSIANS_PER_PIXEL of them a pixel (a pixel
+    with one Gaussian would call it seen wherever it lies)."""
+    coarsen = max(1.0, math.sqrt(GAUSSIANS_PER_PIXEL * float(mask.sum()) / max(1, len(gaussians))))
+    coarse = np.diag([1 / coarsen, 1 / coarsen, 1.0]) @ K
+    shape = (math.ceil(mask.shape[0] / coarsen), math.ceil(mask.shape[1] / coarsen))
+    zbuffer, index = nearest_depth(gaussians.means, coarse, shape)
     nearest = np.where(index >= 0, zbuffer.reshape(-1)[np.maximum(index, 0)], np.inf)
     return gaussians.means[:, 2] <= nearest + FRONT_LAYER * size_m
 

@@ -126,5 +126,6 @@ def learned_objects(prior: LearnedPrior, scene_file: Path, photo: np.ndarray, la
     generator = np.random.default_rng(0)
     parts = [part if len(part) <= share else part.select(np.sort(generator.choice(len(part), share, replace=False)))
              for part in parts]
-    seen = np.concatenate([seen_from_camera(part, K, labels.shape, size_m) for part, size_m in zip(parts, sizes_m)])
+    seen = np.concatenate([seen_from_camera(part, K, labels == k + 1, size_m)
+                           for k, (part, size_m) in enumerate(zip(parts, sizes_m))])
     return Gaussians.concatenate(parts), seen, np.array(volumes)
