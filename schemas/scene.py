@@ -210,7 +210,8 @@ class EnhanceConfig(_Strict):
     hidden_surfaces: Literal["photo", "render"] = Field(
         "photo", description="flow: what surfaces the photograph never saw (the back, an opened interior) show. "
         "photo: the photograph read through the object at source_uv, the texture the reconstruction gave them, "
-        "wherever it maps smoothly (source_coherence); render: the coarse render")
+        "wherever it maps smoothly (source_coherence); render: the coarse render (the default under reconstruct.prior "
+        "lgm, whose unseen surfaces have colours of their own)")
     relight: bool = Field(True, description="flow: re-shade the object for where its surface faces in each frame, "
                           "under one light fitted to the photograph; skipped when that light explains less than half "
                           "of the photograph's brightness")
@@ -460,7 +461,9 @@ def stage_keys(scene: Scene, stage: str) -> dict:
         # hints only where given: a scene without hints hashes as if the key did not exist, so its results stay current
         objs = [{k: o[k] for k in ("mask", "box", "size_m")} | ({"hints": o["hints"]} if o["hints"] else {})
                 for o in data["objects"]]
-        return {"image": data["image"], "camera": data["camera"], "objects": objs, "reconstruct": data["reconstruct"]}
+        # prior only where not the default, likewise: results made before the key existed stay current
+        reconstruct = {k: v for k, v in data["reconstruct"].items() if k != "prior" or v != "symmetric"}
+        return {"image": data["image"], "camera": data["camera"], "objects": objs, "reconstruct": reconstruct}
     if stage == "simulate":
         return {"materials": [o["material"] for o in data["objects"]], "physics": data["physics"],
                 "pitch_deg": data["camera"]["pitch_deg"]}

@@ -20,6 +20,14 @@ from .contact_sheet import contact_sheet
 
 log = logging.getLogger("physmotion.enhance")
 
+
+def hidden_surfaces(scene) -> str:
+    """enhance.hidden_surfaces where the scene gives it; else the render where reconstruct.prior lgm gave the unseen
+    surfaces colours of their own (LGM's), the photograph read through the object otherwise."""
+    if "hidden_surfaces" not in scene.enhance.model_fields_set and scene.reconstruct.prior == "lgm":
+        return "render"
+    return scene.enhance.hidden_surfaces
+
 DESCRIPTION = """\
 Enhance the coarse render into the final video (paper Sec. 3.4), by the scene's enhance.backend:
   flow       (default, no model weights) the photograph's own pixels, carried along with the
@@ -59,7 +67,7 @@ def enhance(args: argparse.Namespace) -> None:
     log.info("backend %s, %d frames of %dx%d", backend, len(coarse.alpha), coarse.width, coarse.height)
     if backend == "flow":
         frames = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold,
-                                     scene.enhance.hidden_surfaces, scene.enhance.relight,
+                                     hidden_surfaces(scene), scene.enhance.relight,
                                      ground=scene.physics.ground.enabled)
     else:
         if args.latents is None:

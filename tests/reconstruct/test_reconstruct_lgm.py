@@ -11,7 +11,7 @@ import yaml
 from safetensors.torch import load_file, save_file
 
 import splat
-from schemas import InputError
+from schemas import InputError, load_scene
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from stages.reconstruct.cli import main
 from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
@@ -301,3 +301,28 @@ def test_prior_lgm_without_weights_exits_2_saying_what_it_needs(tmp_path, capsys
     err = capsys.readouterr().err
     assert "reconstruct.prior" in err and "LGM checkpoint" in err and "--lgm-model" in err
     assert not (tmp_path / "g.h5").exists()
+
+
+@pytest.mark.parametrize("given, prior, shown", [({}, "lgm", "render"), ({}, "symmetric", "photo"),
+                                                 ({"hidden_surfaces": "photo"}, "lgm", "photo")])
+def test_the_learned_colours_show_on_unseen_surfaces_unless_the_scene_says(tmp_path, given, prior, shown):
+    from stages.enhance.cli import hidden_surfaces
+
+    scene = write_scene(tmp_path / "scene", Capsule.tilted(), width=64, height=48, iterations=1)
+    config = yaml.safe_load(scene.read_text())
+    config["reconstruct"]["prior"] = prior
+    config["enhance"] = given
+    scene.write_text(yaml.safe_dump(config))
+    assert hidden_surfaces(load_scene(scene)) == shown
+
+
+def test_the_default_prior_leaves_the_reconstruct_hash_as_before(tmp_path):
+    from schemas import config_hash, stage_keys
+
+    scene = write_scene(tmp_path / "scene", Capsule.tilted(), width=64, height=48, iterations=1)
+    before = config_hash(stage_keys(load_scene(scene), "reconstruct"))
+    config = yaml.safe_load(scene.read_text())
+    for prior, same in (("symmetric", True), ("lgm", False)):
+        config["reconstruct"]["prior"] = prior
+        scene.write_text(yaml.safe_dump(config))
+        assert (config_hash(stage_keys(load_scene(scene), "reconstruct")) == before) == same
