@@ -155,6 +155,9 @@ def why_not_settled(material, height: float, cell: float, gravity: float, lifted
     if lifted:
         return "tossed off the ground at t = 0, it carries no load"
     sag = column_sag(material, height, gravity)
+    if sag > height:  # no stress holds it up: settling would only chase its slump, for as long as that takes
+        return (f"its sag under its weight, rho g H^2 / 2E = {sag:.3g} m, is beyond its {1e3 * height:.0f} mm "
+                f"height: it cannot stand and slumps from t = 0")
     if sag < SAG_CELLS * cell:
         return (f"its sag under its weight, rho g H^2 / 2E = {1e3 * sag:.3g} mm, is under {SAG_CELLS:g} of a "
                 f"{1e3 * cell:.2f} mm cell")
