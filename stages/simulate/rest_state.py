@@ -84,7 +84,10 @@ def support_margin(points_xz: np.ndarray, centre_xz: np.ndarray) -> float:
 
 
 def turn_deg(rest: np.ndarray, now: np.ndarray, weights: np.ndarray) -> float:
-    """Angle in degrees of the best rotation (weighted Kabsch) taking the points rest (N,3) onto now (N,3)."""
+    """Angle in degrees of the best rotation (weighted Kabsch) taking the points rest (N,3) onto now (N,3);
+    NaN where `now` is not finite (a settle that blew up: its run then stops with one paragraph)."""
+    if not np.isfinite(now).all():
+        return math.nan
     a = rest - weights @ rest / weights.sum()
     b = now - weights @ now / weights.sum()
     U, _, Vt = np.linalg.svd((b * weights[:, None]).T @ a)

@@ -346,3 +346,11 @@ def test_no_weight_diagnostics_where_there_is_no_weight_or_no_shape_to_hold(tmp_
     code, err = program(tmp_path, JELLY + physics % ", gravity: [0, 0, 0]")
     assert code == 0, err
     assert not [m for m in warnings_of(caplog) if "weight" in m or "sag" in m], warnings_of(caplog)
+
+
+def test_the_turn_of_a_blown_up_settle_is_nan_not_an_svd_failure():
+    from stages.simulate import rest_state
+
+    x = np.random.default_rng(0).random((20, 3))
+    assert math.isnan(rest_state.turn_deg(x, np.full_like(x, np.nan), np.ones(20)))
+    assert rest_state.turn_deg(x, x, np.ones(20)) == pytest.approx(0.0, abs=1e-5)
