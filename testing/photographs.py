@@ -99,7 +99,8 @@ class Box:
 
     def color(self, points: np.ndarray) -> np.ndarray:
         """sRGB in [0,1] (...,3): a checker of 2 cm squares, so every face has texture."""
-        cells = np.floor(np.nan_to_num((points - self.centre) / 0.02)).astype(int).sum(axis=-1) % 2  # rays that miss: inf
+        squares = (points - self.centre) / 0.02
+        cells = np.floor(np.where(np.isfinite(squares), squares, 0.0)).astype(int).sum(axis=-1) % 2  # misses: inf
         return np.where(cells[..., None] == 0, [0.85, 0.45, 0.2], [0.3, 0.55, 0.8])
 
 

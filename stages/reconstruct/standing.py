@@ -52,6 +52,12 @@ FACE_PX = 1.5
 FACE_RMS_PX = 0.15
 """... and it is a face where that half circle's image lies this close to the outline (rms): an upright
 cylinder's 0.07-0.12 px; a ball's circles, whose images are flatter than its outline, 0.19-0.42."""
+ROUND_WIDEST = 1.2
+ROUND_END = 0.88
+"""... or where the end is not round: the sphere fitted to the profile before it (dome_end) is wider than
+ROUND_WIDEST of the body, or the last slab seen keeps ROUND_END of the widest radius (a ball's, seen from
+0-40 degrees above, 0.48-0.78). Seen level, a cylinder's end face is an edge whose circle fits the
+outline to 0.17 px rms, and its last slab seen keeps 0.93."""
 FACE_SPAN = 0.3
 """A flat face's height and radius are refined together, within FACE_PX of the slab it ends on and 4 % of
 the radius a line through the profile over FACE_SPAN of its height gives there."""
@@ -157,16 +163,18 @@ class Revolution:
     @property
     def extent(self) -> float:
         """Largest extent: a ball's diameter (both ends' spheres), else the larger of its widest diameter
-        (WIDEST_SPAN) and its height."""
+        (WIDEST_SPAN) and the height of its slabs that hold anything."""
         if self.ball is not None:
             return self.ball
         heights = 0.5 * (self.edges[:-1] + self.edges[1:])
+        held = np.flatnonzero(self.radii > 0)
+        tall = float(self.edges[held[-1] + 1] - self.edges[held[0]])
         widest = int(np.argmax(ndimage.uniform_filter1d(self.radii, 9)))
-        near = np.abs(heights - heights[widest]) <= WIDEST_SPAN * abs(self.edges[-1] - self.edges[0])
+        near = np.abs(heights - heights[widest]) <= WIDEST_SPAN * tall
         fit = np.polyfit(heights[near], self.radii[near], 2)
         top = -fit[1] / (2 * fit[0]) if fit[0] < 0 else heights[widest]
         radius = float(np.polyval(fit, np.clip(top, heights[near].min(), heights[near].max())))
-        return max(2 * radius, float(self.edges[-1] - self.edges[0]))
+        return max(2 * radius, tall)
 
     def intersect(self, rays: np.ndarray, chunk: int = 2048) -> tuple[np.ndarray, np.ndarray]:
         """(t_in, t_out) (N,) where rays t * rays (N,3) enter and leave it; NaN where they miss."""
@@ -313,7 +321,9 @@ def revolution(view: GravityView) -> Optional[Revolution]:
         face = None
         if shares and max(shares) >= TRACED_SHARE:
             face, misfit = flat_end(view, axis_x, edges, radii, int(near[int(np.argmax(shares))]), outward, pixel)
-        ends.append((face, None) if face is not None and misfit <= FACE_RMS_PX else dome_end(edges, radii, end, outward, pixel))
+        dome = dome_end(edges, radii, end, outward, pixel)
+        round_end = dome[1][2] <= ROUND_WIDEST * radii.max() and radii[end] <= ROUND_END * radii.max()
+        ends.append((face, None) if face is not None and (misfit <= FACE_RMS_PX or not round_end) else dome)
     (top_y, top_dome), (bottom_y, bottom_dome) = ends
     ball = None
     if top_dome is not None and bottom_dome is not None:  # one sphere, if both ends' agree: a ball
