@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 import yaml
+from scipy import ndimage
 from safetensors.torch import load_file, save_file
 
 import splat
@@ -288,6 +289,17 @@ def test_prior_lgm_runs_in_pm_reconstruct(tiny, tmp_path, monkeypatch):
         for dx in range(5):
             near |= grown[dy:dy + 48, dx:dx + 64]
     assert near[rows, cols].mean() > 0.95
+    # and they render there (splat at the artifact's camera): the mask covered, nothing beyond the reach of the
+    # Gaussians' footprints (three standard deviations of the median one; random weights make them wide)
+    as_tensor = lambda a: torch.tensor(np.asarray(a), dtype=torch.float32)  # noqa: E731
+    alpha = splat.rasterize(as_tensor(artifact.means), as_tensor(artifact.opacities), as_tensor(artifact.colors),
+                            splat.Camera(artifact.K, np.eye(4), 64, 48), scales=as_tensor(artifact.scales),
+                            rotations=as_tensor(artifact.rotations)).alpha.numpy()
+    mask = artifact.mask == 1
+    assert (alpha[mask] > 0.5).mean() > 0.9
+    reach = 3 * np.median(artifact.scales) * artifact.K[0, 0] / np.median(artifact.means[:, 2])
+    outside = ndimage.distance_transform_edt(~mask) > reach
+    assert alpha[outside].sum() < 0.05 * alpha.sum()
 
 
 def test_prior_lgm_without_weights_exits_2_saying_what_it_needs(tmp_path, capsys):
