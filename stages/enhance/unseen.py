@@ -13,10 +13,9 @@ Colours are read as albedo: the photograph's pixel divided by the shading the
 fitted light gave it (relight.py), times the shading of where the surface faces
 now. The photograph's pixels are a poor record where it saw the surface edge-on
 (a pixel spans a strip of surface, and along the silhouette mixes in the
-background) or in deep shade (its colour is mostly noise over a small shading):
-there the albedo is continued inwards from the nearest pixels it recorded well
-(:meth:`Albedo.fit`), so that a surface which turns from the limb towards the
-camera shows a smooth continuation rather than the limb's rings and dark rim. A
+background): there the albedo is continued inwards from the nearest pixels it
+recorded well (:meth:`Albedo.fit`), so that a surface which turns from the limb
+towards the camera shows a smooth continuation rather than the limb's rings. A
 pixel the photograph recorded well, or one still seen about as it was, keeps the
 photograph's own pixel, re-shaded.
 """
@@ -40,9 +39,6 @@ RECORDED_FACING = (0.3, 0.55)
 """Cosine between the surface's normal and the view ray (at rest) from which the photograph's pixel
 starts to be, and is fully, a record of the surface's colour. Below, a pixel spans a strip of surface
 (at 0.3, more than three times its width along it) and its colour is the limb's dark, blurred rim."""
-RECORDED_SHADING = (0.1, 0.2)
-"""Share of the brightest shading (ambient + |light|) from which the photograph's pixel starts to be,
-and is fully, a record of the surface's colour: in deep shade dividing by the shading amplifies noise."""
 UNCHANGED = 0.2
 """Change of the facing cosine (and of the shading, as a share of the brightest) over which a pixel the
 photograph recorded poorly goes from its own pixel (seen as it was: at rest the video is the
@@ -127,7 +123,7 @@ def mirrored_source(uv: np.ndarray, front_distance: np.ndarray, rays: np.ndarray
         normal: (h', w', 3), offset: (h', w') each pixel's plane (its object's, :class:`MirrorPlanes`).
         K: (3, 3) output intrinsics.
     Returns:
-        Image points at output resolution; uv itself where the front is not known.
+        Image points at output resolution, always on the front; uv itself where the front is not known.
     """
     inverse_K = np.linalg.inv(K)
     ray = np.concatenate([uv, np.ones_like(uv[..., :1])], -1) @ inverse_K.T
@@ -146,7 +142,9 @@ def mirrored_source(uv: np.ndarray, front_distance: np.ndarray, rays: np.ndarray
         back = ray * ((offset - height) / np.where(np.abs(along) > 1e-6, along, 1e-6))[..., None]
         image = (back + 2 * height[..., None] * normal) @ K.T
         step = image[..., :2] / np.maximum(image[..., 2:], 1e-9)
-        p = np.where(((weight > 0.5) & np.isfinite(step).all(-1))[..., None], step, p)
+        # a step off the front (near the limb, where the front is steep) is not taken
+        on_front = (weight > 0.5) & np.isfinite(step).all(-1) & (sample_at(weight_map, step) > 0.5)
+        p = np.where(on_front[..., None], step, p)
     return p.astype(np.float32)
 
 
@@ -184,12 +182,9 @@ class Albedo:
         facing_rest = facing(rest_normals, rays)
         if shading is None:
             shading_rest = np.ones(mask.shape, np.float32)
-            lit = np.ones(mask.shape, np.float32)
         else:
             shading_rest = np.nan_to_num(shading(np.nan_to_num(rest_normals)), nan=1.0).astype(np.float32)
-            brightest = shading.ambient + float(np.linalg.norm(shading.light))
-            lit = ramp(shading_rest / brightest, RECORDED_SHADING)
-        recorded = (mask * ramp(facing_rest, RECORDED_FACING) * lit).astype(np.float32)
+        recorded = (mask * ramp(facing_rest, RECORDED_FACING)).astype(np.float32)
         albedo = photo_linear / shading_rest[..., None]
         inside = cv2.dilate((mask > 0).astype(np.uint8), np.ones((2 * CONTINUE_MARGIN_PX + 1,) * 2, np.uint8)) > 0
         continued = continue_inwards(albedo, recorded > 0.5, inside)
