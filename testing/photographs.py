@@ -99,8 +99,8 @@ class Box:
 
     def color(self, points: np.ndarray) -> np.ndarray:
         """sRGB in [0,1] (...,3): a checker of 2 cm squares, so every face has texture."""
-        squares = (points - self.centre) / 0.02
-        cells = np.floor(np.where(np.isfinite(squares), squares, 0.0)).astype(int).sum(axis=-1) % 2  # misses: inf
+        squares = np.nan_to_num((points - self.centre) / 0.02, posinf=0.0, neginf=0.0)  # rays that miss run far
+        cells = np.floor(np.clip(squares, -1e9, 1e9)).astype(np.int64).sum(axis=-1) % 2
         return np.where(cells[..., None] == 0, [0.85, 0.45, 0.2], [0.3, 0.55, 0.8])
 
 
