@@ -34,6 +34,8 @@ GAUSSIANS_PER_PIXEL = 8
 VOLUME_CELLS = 48
 """Cells along the largest extent of the occupancy grid that measures the enclosed volume, at most."""
 NEIGHBOURS = 3
+"""The grid's cells are at least the median distance from a Gaussian to its this-many-th nearest one, so that
+the cells holding Gaussians make a closed sheet (a uniformly sampled ball: 1.04 of its volume)."""
 ENCLOSING_WALLS = 5
 """A cell is inside when the surface lies beyond it in this many of the six axis directions: one gap in the
 sampled surface (LGM leaves some where no view looks straight at it) does not let the cells in line with it out,
