@@ -32,4 +32,4 @@ browser:
 # Every simulate kernel in Warp's debug mode (bounds-checked indexing); splat's
 # kernels are checked the same way by tests/splat.
 debug-kernels: $(INSTALLED)
-	$(BIN)/python benchmarks/debug_kernels.py
+	PYTHONPATH=. $(BIN)/python benchmarks/debug_kernels.py
