@@ -1,7 +1,10 @@
 """The unseen half: each object's body from its silhouette, upright in the gravity frame.
 
 The photograph gives a silhouette and, where the object is seen, its colours;
-what lies behind is a prior (docs/decisions/0001-back-closure.md). The body
+what lies behind is a prior (docs/decisions/0001-back-closure.md, 0019). Where
+a standing solid, a body of revolution about the vertical or an upright box,
+explains the silhouette (standing.standing_solid), it is the body, a handle
+keeping its own balls (solid_depths). Otherwise the body
 is swept by the balls of the silhouette's medial axis (depth.medial_balls):
 each pixel lies on the ball of its nearest axis point, as wide as the
 silhouette there. The axis is read in a view that faces the object (a ball
@@ -362,10 +365,10 @@ def support_margin(points: np.ndarray, centre: np.ndarray) -> float:
 
 def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], pitch_deg: float,
                   inverse_depth: Optional[np.ndarray] = None) -> list[ObjectDepth]:
-    """Metric front and back camera z (H,W) of each object (labels k + 1), NaN off it: the body of its
-    medial balls (ball_depths), its largest extent sizes_m[k], cut flat where it stands on the ground
-    (standing_cut). With ``inverse_depth`` (a depth model's,
-    (H,W)) the front follows the model, aligned to the body's front."""
+    """Metric front and back camera z (H,W) of each object (labels k + 1), NaN off it: its standing solid
+    (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], cut
+    flat where it stands on the ground (standing_cut). With ``inverse_depth`` (a depth model's, (H,W))
+    the front follows the model, aligned to the body's front."""
     down = down_direction(pitch_deg)
     out = []
     for k, size in enumerate(sizes_m):

@@ -39,45 +39,45 @@ SMALLEST_PX = 32
 0.97 of its volume as a body of revolution, 0.99 in balls."""
 BLUR_PX = 1.5
 """Gaussian sigma (pixels) on the signed distance: the staircase of the pixels smoothed to its edge."""
-TRACE_PX = 0.75
-"""A point of an end circle's image within this of the outline traces it..."""
-TRACED_SHARE = 0.4
-"""... and an end circle whose image traces the outline along this share of its points can be a flat face
-(an upright cylinder's end: 0.43-0.65 of its points; a ball's circles, which touch it at a point or two
-and curve away, 0.31-0.47)."""
+CIRCLE_POINTS = 72
+"""Points on each horizontal circle read against the outline."""
+SLICES = 240
+"""Horizontal slabs of a body of revolution: a quarter of a pixel each on a 60 px body."""
+HIDDEN_PX = 0.3
+"""The widest circles that fit along a face's rim touch the outline all along it, and the pixels'
+staircase leaves them a fifth of a pixel short there: circles beyond the face, which touch it at a point
+or two, fill that band. An end may uncover a band this wide along the silhouette's width (seen_ends)."""
 END_SEARCH = 0.1
 """The face of a flat end is looked for within this share of the height seen inside the last slab seen
 (which may be one of the widest circles that fit beyond the face: up to 8 px of 100)."""
-FACE_PX = 1.5
+TRACE_PX = 0.75
+"""A point of a circle's image within this of the outline traces it..."""
+TRACED_SHARE = 0.4
+"""... and a circle whose image traces the outline along this share of its points can be a flat face
+(an upright cylinder's end: 0.43-0.65 of its points; a ball's circles, which touch it at a point or two
+and curve away, 0.31-0.47)..."""
+NARROW_SPAN = 0.1
+NARROW_SHARE = 0.92
+"""... where the body does not narrow towards it: it keeps NARROW_SHARE of the widest radius over the
+NARROW_SPAN of the height seen before it (a ball's circles, 0.8 of its radius above its centre, keep 0.76
+of it; an upright cylinder's 0.98-1.02)..."""
 FACE_RMS_PX = 0.15
-"""... and it is a face where that half circle's image lies this close to the outline (rms): an upright
-cylinder's 0.07-0.12 px; a ball's circles, whose images are flatter than its outline, 0.19-0.42."""
+"""... and it is a face where the half of its circle that faces the outline lies this close to it (rms,
+flat_end): an upright cylinder's 0.07-0.12 px; a ball's circles, whose images are flatter than its
+outline, 0.19-0.42..."""
 ROUND_WIDEST = 1.2
 ROUND_END = 0.88
 """... or where the end is not round: the sphere fitted to the profile before it (dome_end) is wider than
 ROUND_WIDEST of the body, or the last slab seen keeps ROUND_END of the widest radius (a ball's, seen from
 0-40 degrees above, 0.48-0.78). Seen level, a cylinder's end face is an edge whose circle fits the
 outline to 0.17 px rms, and its last slab seen keeps 0.93."""
+FACE_PX = 1.5
 FACE_SPAN = 0.3
 """A flat face's height and radius are refined together, within FACE_PX of the slab it ends on and 4 % of
 the radius a line through the profile over FACE_SPAN of its height gives there."""
 WIDEST_SPAN = 0.15
 """The widest radius is the top of a parabola fitted to the profile over this share of its height either
 side of its widest slab (the widest single slab is the noisiest: 2-3 % long on an upright cylinder)."""
-"""The face of a flat end is looked for this far inside the last slab seen (which may be one of the
-widest circles that fit beyond it, a pixel or two out)."""
-NARROW_SPAN = 0.1
-NARROW_SHARE = 0.92
-"""An end is flat only where the body does not narrow towards it: its face keeps NARROW_SHARE of the widest
-radius over the NARROW_SPAN of the height seen before it (a ball's circles, 0.8 of its radius above its
-centre, keep 0.76 of it; an upright cylinder's 0.98-1.02)."""
-CIRCLE_POINTS = 72
-SLICES = 240
-"""Horizontal slices of a body of revolution: a quarter of a pixel each on a 60 px body."""
-HIDDEN_PX = 0.3
-"""The widest circles that fit along a face's rim touch the outline all along it, and the pixels'
-staircase leaves them a fifth of a pixel short there: circles beyond the face, which touch it at a point
-or two, fill that band."""
 SUPERSAMPLE = 4
 """Raster cells per pixel side, for which slice covers which part of the image."""
 BOX_YAWS_DEG = (0.0, 20.0, 40.0, 60.0, 80.0)
@@ -200,6 +200,7 @@ class Revolution:
         return t_in, t_out
 
     def base_height(self) -> float:
+        """The height (y, downwards) of its lowest slab's bottom."""
         return float(self.edges[-1])
 
 
@@ -420,6 +421,7 @@ class UprightBox:
 
     @property
     def extent(self) -> float:
+        """Largest extent: its longest side."""
         return max(self.width, self.depth, self.height)
 
     def axes(self) -> np.ndarray:
@@ -428,12 +430,15 @@ class UprightBox:
         return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
     def centre(self) -> np.ndarray:
+        """(3,) its middle."""
         return np.array([self.x, 1.0 - self.height / 2, self.z])
 
     def half(self) -> np.ndarray:
+        """(3,) half its sides along its own x, y, z."""
         return 0.5 * np.array([self.width, self.height, self.depth])
 
     def corners(self) -> np.ndarray:
+        """(8,3) its corners."""
         signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
         return self.centre() + (signs * self.half()) @ self.axes()
 
@@ -450,6 +455,7 @@ class UprightBox:
         return np.where(hit, enter, np.nan), np.where(hit, leave, np.nan)
 
     def base_height(self) -> float:
+        """The height (y, downwards) of its base: the ground."""
         return 1.0
 
 
