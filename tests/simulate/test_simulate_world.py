@@ -309,3 +309,17 @@ def test_a_held_body_is_not_named_as_one_that_may_not_stand(device, caplog):
         settled = sim.settle()
     assert settled.bodies == [0] and not settled.footless and not settled.giving_way
     assert not [r.getMessage() for r in caplog.records if r.levelno >= 30]
+
+
+def test_frames_at_rest_cost_no_substeps_until_a_condition_acts(device):
+    """A 10 cm metal box standing on slip ground with nothing acting is at rest after its first frames (its
+    sag under its weight, 1.5e-4 mm, rings by less than 5 % of a cell): frame 4 (of 0.1 s) is frame 3 again,
+    with no substeps. An impulse of 0.5 m/s at 0.5 s wakes it, and it slides at the impulse's speed from then
+    on (tol 5 %)."""
+    points = tilted_box((SIZE, SIZE, SIZE), 0.0)
+    sim, tr = run(points, M.Metal(), device, duration_s=0.8, ground={"type": "slip"},
+                  conditions=[{"type": "impulse", "velocity": [0.5, 0.0, 0.0], "start_s": 0.5}])
+    assert tr.substeps[4] == 0 and tr.substeps[5:].min() > 0
+    np.testing.assert_array_equal(tr.positions[4], tr.positions[3])
+    travel = centre_of_mass(tr)[:, 0] - centre_of_mass(tr)[5, 0]
+    np.testing.assert_allclose(travel[6:], 0.5 * (tr.time_s[6:] - 0.5), rtol=0.05)
