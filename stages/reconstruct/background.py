@@ -46,9 +46,10 @@ coffee scene, whose ring shows around the cup at rest: frame-0 PSNR 36.7 dB with
 34.4 / 36.1 / 36.5 dB with 1 / 2 / 3 radii, 32.6 dB with exemplar alone."""
 
 
-SHADOW_WORKING_PX = 32
+SHADOW_WORKING_PX = 64
 """The shadow is estimated on a copy in which the objects' size (the square root of their pixel
-count) is this many pixels, smoothed by one of them: the example ball's shadow is 4 of them tall."""
+count) is this many pixels, smoothed by one of them: the example ball's shadow is 8 of them tall
+(at 32 the hard shadow band of benchmarks/scenes' loaf, 6 px under its edge, was diluted away)."""
 SHADOW_REFERENCE = (2.0, 80)
 """The unshadowed brightness at a pixel: this percentile of the smoothed brightness over a window of
 this many object sizes across and a quarter of that high (a shadow fills less than a fifth of it;
