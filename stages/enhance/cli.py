@@ -32,9 +32,10 @@ DESCRIPTION = """\
 Enhance the coarse render into the final video (paper Sec. 3.4), by the scene's enhance.backend:
   flow       (default, no model weights) the photograph's own pixels, carried along with the
              simulated motion through source_uv and trusted by source_confidence; surfaces the
-             photograph never saw read it through the object (enhance.hidden_surfaces: photo) or
-             show the render (render); re-shaded for where the surface faces now
-             (enhance.relight); blended over the inpainted background.
+             photograph never saw take the colour of the mirrored front they continue
+             (enhance.hidden_surfaces: photo) or show the render (render); re-shaded for where the
+             surface faces now (enhance.relight); blended over the inpainted background, with the
+             objects' shadows cast where they are now when the scene has a ground.
   diffusion  Stable Diffusion 2.1 + ControlNets from local weights: needs --latents from pm-invert
              (and --lora from pm-lora when enhance.diffusion.lora.enabled).
 Writes the video (H.264) and contact_sheet.png beside it (rows: input = the photograph, coarse =

@@ -4,16 +4,17 @@ Every coarse pixel knows (``source_uv``) where its surface was in the
 photograph at rest, (``source_coherence``) whether the photograph maps smoothly
 onto the frame there and (``source_confidence``) how visible that surface was
 in the photograph. Where the surface was seen we take the photograph's colour
-from that point. A surface the photograph never saw (the back, an opened
-fracture) has as its source the point of the photograph in front of it, the
-colour the reconstruction gave it: with ``hidden_surfaces="photo"`` we read the
-photograph there too, wherever the map is smooth, which keeps the photograph's
-detail where the render would blur it; with ``"render"`` we keep the render.
-Where the map is not smooth (tumbling, flowing material) the render is used.
-The photograph's shading is then moved from where the surface faced at rest to
-where it faces now (relight.py), and the result is blended with the rendered alpha over the inpainted
-background, which shows the photograph itself beside the object wherever the object still stands as at
-rest (compositing.Backdrop).
+from that point. A surface the photograph never saw (the back) takes, with
+``hidden_surfaces="photo"``, the colour of the surface it continues, wherever
+the map is smooth: the photograph where it saw the mirror image of that surface
+(unseen.py), which keeps the photograph's detail where the render would blur
+it; with ``"render"`` we keep the render. Where the map is not smooth
+(tumbling, flowing material) the render is used. Colours are read as albedo
+and shaded for where the surface faces now under the light fitted to the
+photograph (relight.py, unseen.py), and blended with the rendered alpha over
+the inpainted, shadow-free background, which the objects' shadows darken where
+they are now (shadow.py) and which shows the photograph itself beside an
+object wherever it still stands as at rest (compositing.Backdrop).
 """
 from __future__ import annotations
 
