@@ -23,7 +23,7 @@ log = logging.getLogger("physmotion.enhance")
 
 def hidden_surfaces(scene) -> str:
     """enhance.hidden_surfaces where the scene gives it; else the render where reconstruct.prior lgm gave the unseen
-    surfaces colours of their own (LGM's), the photograph read through the object otherwise."""
+    surfaces colours of their own (LGM's), the photograph (the mirrored front they continue) otherwise."""
     if "hidden_surfaces" not in scene.enhance.model_fields_set and scene.reconstruct.prior == "lgm":
         return "render"
     return scene.enhance.hidden_surfaces
