@@ -25,7 +25,7 @@ RESULTS_MD = ROOT / "benchmarks" / "RESULTS.md"
 SECTIONS = [
     ("Simulation", ["mpm", "rest", "mass", "tearing"]),
     ("Reconstruction", ["reconstruct", "segmentation", "large_photograph"]),
-    ("Rendering and enhancement", ["splat", "render", "enhance", "diffusion"]),
+    ("Rendering and enhancement", ["splat", "render", "enhance", "granular", "diffusion"]),
     ("Workflow", ["workflow", "phone_photograph", "setup", "test_suite", "containers", "stages_cuda"]),
 ]
 HEADER = """# Benchmark results
