@@ -47,10 +47,8 @@ log = logging.getLogger("physmotion.simulate")
 # a round body's roll on its foot is far softer than its sag (docs/decisions/0002-settle.md).
 RELAXED = 1.0e-7
 SETTLE_PERIODS = 10.0
-# ... and at most this share of the run's substeps, but never fewer than MIN_PERIODS periods, which
-# carry the sag's first peaks (docs/decisions/0020-settle-where-it-matters.md).
+# ... and at most this share of the run's substeps (docs/decisions/0020-settle-where-it-matters.md).
 SETTLE_SHARE = 0.2
-MIN_PERIODS = 4.0
 # A body whose column sag under its weight is below this many grid cells is not settled: started
 # unstressed it falls into its weight by twice that, which the grid does not resolve.
 SAG_CELLS = 0.1

@@ -220,7 +220,7 @@ class Simulation:
                              "lower physics.particles_per_cell or physics.grid")
         log.info("about %d substeps per frame at rest (%d in all; more while things move fast), %.2f GiB of frames",
                  per_frame, total, frames_bytes / 2 ** 30)
-        self._substeps_at_rest = total
+        self.substeps_at_rest = total
 
     def _substep_cause(self) -> str:
         """The scene key that sets the substep: physics.dt, a condition's velocity or force, gravity (a frame of
@@ -339,13 +339,12 @@ class Simulation:
         # a held body cannot fall: only the free ones can be footless
         can_fall = [k for k in deformable if not np.any(held[self.object_id == k])]
         per_period = period / dt
-        most = math.ceil(min(rest_state.SETTLE_PERIODS * per_period,
-                             max(rest_state.SETTLE_SHARE * self._substeps_at_rest,
-                                 rest_state.MIN_PERIODS * per_period)))
+        most = max(1, math.ceil(min(rest_state.SETTLE_PERIODS * per_period,
+                                    rest_state.SETTLE_SHARE * self.substeps_at_rest)))
         g = float(np.linalg.norm(self.gravity_world))
         log.info("settling objects %s into their weight: at most %d substeps (%.2f s of relaxation, %.0f %% of the "
-                 "run's %d)", deformable, most, most * dt, 100 * most / max(self._substeps_at_rest, 1),
-                 self._substeps_at_rest)
+                 "run's %d)", deformable, most, most * dt, 100 * most / max(self.substeps_at_rest, 1),
+                 self.substeps_at_rest)
         started = reported = time.perf_counter()
         steps, footless = 0, False
         while steps < most:
@@ -389,7 +388,7 @@ class Simulation:
                  "peaks, the last %.1e of the first), a sag of up to %.2f mm held up (%.0f s)", deformable,
                  steps, result.relaxation_s, relaxation.peaks, relaxation.residual, 1e3 * result.sag, result.wall_s)
         log.info("the run: about %.0f s for its %d substeps at rest, at the settle's %.1f ms each",
-                 self._substeps_at_rest * result.wall_s / steps, self._substeps_at_rest, 1e3 * result.wall_s / steps)
+                 self.substeps_at_rest * result.wall_s / steps, self.substeps_at_rest, 1e3 * result.wall_s / steps)
         return result
 
     def run(self) -> TrajectoriesArtifact:

@@ -79,8 +79,7 @@ def test_the_settled_load_holds_the_photographed_shape_up(device):
     """A jelly column (6 x 20 x 6 cm, E = 5e4 Pa) on friction ground: the settle's sag is that of an elastic
     column under its own weight, rho g H^2 / (2 E) = 3.9 mm (tol 10 %; measured 4.1), and held up by that
     load no particle moves more than 3 % of it over 0.6 s (measured 1.5 %; started from the load of a settle
-    that let it sag, up to 7 %). The settle costs at most a fifth of the run's substeps, or four of the
-    column's slowest periods where that is more."""
+    that let it sag, up to 7 %). The settle costs at most a fifth of the run's substeps at rest."""
     E, H = 5e4, 0.2
     points = box_surface(np.zeros(3), np.array([0.06, H, 0.06]), 0.005) + [0.0, 0.0, 0.6]
     sim, tr = run(points, M.Jelly(youngs_modulus=E), device, duration_s=0.6,
@@ -89,9 +88,7 @@ def test_the_settled_load_holds_the_photographed_shape_up(device):
     assert sim.settled.bodies == [0] and not sim.settled.giving_way
     assert sim.settled.sag == pytest.approx(column, rel=0.1)
     assert np.max(np.abs(tr.positions - tr.positions[0])) < 0.03 * column
-    period = rest_state.fundamental_period(M.Jelly(youngs_modulus=E), H, 0.06)
-    dt = sim.settled.relaxation_s / sim.settled.substeps
-    assert sim.settled.substeps <= max(0.2 * tr.substeps.sum(), rest_state.MIN_PERIODS * period / dt) + 1
+    assert sim.settled.substeps <= 0.2 * sim.substeps_at_rest + 1
 
 
 def test_the_ground_lies_through_the_lowest_point():
@@ -239,7 +236,8 @@ def test_the_settle_is_elastic_and_names_a_body_standing_past_its_yield(caplog):
     height = 1.0
     points = box_surface(np.zeros(3), np.array([0.3 * height, height, 0.3 * height]), 0.05 * height)
     material = M.Plasticine()
-    sim = Simulation(PhysicsConfig(duration_s=0.1, grid=16), [material], points + [0, 0, 2.0],
+    # the settle may take a fifth of the run's substeps: a 1 s run gives it the column's sag
+    sim = Simulation(PhysicsConfig(duration_s=1.0, grid=16), [material], points + [0, 0, 2.0],
                      np.zeros(len(points), int))
     with caplog.at_level("WARNING", logger="physmotion.simulate"):
         sim.settle()
