@@ -543,11 +543,13 @@ class Simulation:
         p = int(np.argmax(bad)) if bad.any() else int(np.argmax(np.sum(v * v, axis=1)))
         k = int(self.object_id[p])
         what = "non-finite positions (NaN)" if bad.any() else f"a particle at {max_speed:.3g} m/s (limit {limit:.3g})"
+        # a rigid body has no stiffness to lower: what flings it is a far heavier body sharing its grid cells
+        material = ("raise its density or lower its neighbours'" if self.materials[k].preset == "rigid"
+                    else "lower its youngs_modulus or raise its density")
         raise InputError(self.scene_file, f"objects[{k}].material",
                          f"the simulation blew up at frame {f} (t = {f / self.physics.fps:.3f} s): object {k} "
                          f"({self.materials[k].preset}) has {what} with substeps of {h:.2e} s",
-                         ("remove physics.dt (the CFL bound then follows the particles' speed), lower its "
-                          "youngs_modulus or raise its density, or soften the conditions acting on it")
+                         ("remove physics.dt (the CFL bound then follows the particles' speed), "
+                          f"{material}, or soften the conditions acting on it")
                          if self.physics.dt is not None else
-                         "lower its youngs_modulus or raise its density, set physics.dt below "
-                         f"{0.5 * h:.1e} s, or soften the conditions acting on it")
+                         f"{material}, set physics.dt below {0.5 * h:.1e} s, or soften the conditions acting on it")

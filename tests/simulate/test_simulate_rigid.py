@@ -222,3 +222,24 @@ def test_a_rigid_body_fixed_along_a_line_turns_about_that_line_only(device):
     measured = angular_acceleration(tr, np.ones(len(tr.masses), bool), slice(None))
     assert np.linalg.norm(measured - expected) < 0.03 * np.linalg.norm(expected)
     assert np.max(np.linalg.norm(tr.positions[:, line] - held, axis=2)) < 1e-4
+
+
+def test_a_light_rigid_body_flung_by_a_heavy_neighbour_is_told_to_be_heavier(tmp_path):
+    """A rigid box of 5.6 kg/m^3 beside plasticine of 3e5 kg/m^3 slumping on an 8-cell grid (a draw of the
+    property test) is flung at thousands of m/s: the paragraph names the rigid body's material and a heavier
+    density, not a youngs_modulus it has not got; at 1000 kg/m^3 the scene runs."""
+    from .test_simulate_program import program, refused
+
+    scene = ("objects:\n  - {size_m: 0.08, material: {preset: foam, youngs_modulus: 18891.66, density: 1.0, "
+             "yield_stress: 316.28, viscosity: 983.8}}\n"
+             "  - {size_m: 0.08, material: {preset: plasticine, youngs_modulus: 26456.79, density: 296667.26, "
+             "yield_stress: 10.0}}\n  - {size_m: 0.08, material: {preset: rigid, density: 5.6}}\n"
+             "physics:\n  duration_s: 0.05\n  fps: 20\n  grid: 8\n  particles_per_cell: 1\n"
+             "  ground: {type: sticky}\n  conditions: [{type: fixed, object: 0, start_s: 1.0e-12, end_s: 0.0385}]\n"
+             "camera: {pitch_deg: -70.96}\n")
+    means, object_id = boxes(((-0.16, 0.0, 0.5), (-0.08, 0.06, 0.56)), ((-0.04, 0.0, 0.5), (0.04, 0.08, 0.55)),
+                             ((0.08, 0.02, 0.5), (0.14, 0.08, 0.58)), spacing=0.01)
+    err = refused(*program(tmp_path, scene, means, object_id), "objects[2].material")
+    assert "raise its density" in err and "youngs_modulus" not in err
+    code, err = program(tmp_path, scene.replace("density: 5.6", "density: 1000"), means, object_id)
+    assert code == 0, err
