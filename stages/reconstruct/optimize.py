@@ -74,6 +74,18 @@ class View:
     crop: tuple[slice, slice] = (slice(None), slice(None))
 
 
+def colour_target(rendered: torch.Tensor, view: View) -> torch.Tensor:
+    """The colour each pixel of ``view`` is supervised towards (H,W,3): the photograph on the object's pixels,
+    and off them the render itself, so colour gives no gradient there.
+
+    Off the object the photograph's foreground is black: Gaussians reaching a pixel or two past the outline
+    would be darkened to match it, and show as a dark ring once the object moves. Their reach is the
+    silhouette term's to correct.
+    """
+    off_object = (view.target_alpha <= 0)[..., None]
+    return torch.where(off_object, rendered.detach(), view.target_rgb)
+
+
 class _Parameters(torch.nn.Module):
     """The optimised tensors in unconstrained form: log scales, opacity logits."""
 
@@ -128,8 +140,8 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
             for group in optimizer.param_groups:
                 group["lr"] *= 0.1
         render = params.render(input_view.camera)
-        color = color_loss(render.features[input_view.crop], input_view.target_rgb[input_view.crop],
-                           settings.dssim_weight)
+        target = colour_target(render.features, input_view)
+        color = color_loss(render.features[input_view.crop], target[input_view.crop], settings.dssim_weight)
         silhouette = (render.alpha - input_view.target_alpha).abs().mean()
         total = color + settings.silhouette_weight * silhouette
         hard = None
