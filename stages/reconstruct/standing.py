@@ -23,6 +23,8 @@ import numpy as np
 from scipy import ndimage, optimize
 from scipy.spatial import ConvexHull, QhullError
 
+from schemas.camera import project_points
+
 from .depth import edge_points
 
 FIT_IOU = 0.95
@@ -126,8 +128,7 @@ class GravityView:
 
     def project(self, points: np.ndarray) -> np.ndarray:
         """Image coordinates (...,2) (u, v; pixel centres at +0.5) of points (...,3) in the gravity frame."""
-        camera = points @ self.R
-        return camera[..., :2] / camera[..., 2:3] * np.diag(self.K)[:2] + self.K[:2, 2]
+        return project_points(points @ self.R, self.K)
 
     def sdf_at(self, points: np.ndarray) -> np.ndarray:
         """Blurred signed distance (...) px of the images of points (...,3), bilinear; behind the camera -inf."""

@@ -20,6 +20,8 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
+from schemas.camera import project_points
+
 from ..lift import Gaussians
 from ..ply import OPENGL_TO_CAMERA, distance_for_extent
 from .splatter import SplatterGaussians
@@ -42,17 +44,16 @@ sampled surface (LGM leaves some where no view looks straight at it) does not le
 at the price of counting an open cavity (a cup's) as solid."""
 
 
-def project(means: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pixel columns and rows (N,) int of camera-space points (N,3), by the pixel they fall in."""
-    uv = means @ K.T
-    uv = uv[:, :2] / uv[:, 2:3]
-    return np.floor(uv[:, 0]).astype(int), np.floor(uv[:, 1]).astype(int)
+def pixels_of(means: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel columns and rows (N,) int of camera-space points (N,3) m, by the pixel they fall in."""
+    uv = np.floor(project_points(means, K)).astype(int)
+    return uv[:, 0], uv[:, 1]
 
 
 def nearest_depth(means: np.ndarray, K: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """The z-buffer (H,W) of the points (inf where none falls) and each point's pixel index (N,), -1 off the image."""
     height, width = shape
-    cols, rows = project(means, K)
+    cols, rows = pixels_of(means, K)
     inside = (cols >= 0) & (cols < width) & (rows >= 0) & (rows < height) & (means[:, 2] > 0)
     index = np.where(inside, rows * width + cols, -1)
     zbuffer = np.full(height * width, np.inf)
