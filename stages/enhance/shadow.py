@@ -25,7 +25,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import STILL_PX, resize_to
-from .unseen import MirrorPlanes, view_rays
+from .unseen import MirrorPlanes, rest_in_camera, view_rays
 
 log = logging.getLogger("physmotion.enhance.shadow")
 
@@ -58,9 +58,7 @@ class Ground:
     @classmethod
     def of(cls, gaussians: GaussiansArtifact) -> "Ground":
         """Through the objects' lowest point at rest, normal to gravity (as pm-simulate lays it)."""
-        R, t = gaussians.world_to_camera[:3, :3], gaussians.world_to_camera[:3, 3]
-        down = R @ np.array([0.0, 1.0, 0.0])  # the world's y runs along gravity
-        means = gaussians.means.astype(np.float64) @ R.T + t
+        means, down = rest_in_camera(gaussians)
         return cls(down, float((means @ down).max()))
 
 

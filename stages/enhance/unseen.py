@@ -67,6 +67,13 @@ def ramp(x: np.ndarray, bounds: tuple[float, float]) -> np.ndarray:
     return s * s * (3 - 2 * s)
 
 
+def rest_in_camera(gaussians: GaussiansArtifact) -> tuple[np.ndarray, np.ndarray]:
+    """The Gaussians' means at rest (G,3) m and gravity's unit direction (3,), both in the camera frame."""
+    R, t = gaussians.world_to_camera[:3, :3], gaussians.world_to_camera[:3, 3]
+    down = R @ np.array([0.0, 1.0, 0.0])  # the world's y runs along gravity
+    return gaussians.means.astype(np.float64) @ R.T + t, down
+
+
 def view_rays(K: np.ndarray, h: int, w: int) -> np.ndarray:
     """(h, w, 3) unit directions, camera frame, of the rays through the pixel centres of intrinsics K."""
     rows, cols = np.indices((h, w), dtype=np.float64)
@@ -92,9 +99,7 @@ class MirrorPlanes:
 
     @classmethod
     def of(cls, gaussians: GaussiansArtifact) -> "MirrorPlanes":
-        R, t = gaussians.world_to_camera[:3, :3], gaussians.world_to_camera[:3, 3]
-        down = R @ np.array([0.0, 1.0, 0.0])  # the world's y runs along gravity
-        means = gaussians.means.astype(np.float64) @ R.T + t
+        means, down = rest_in_camera(gaussians)
         objects = int(gaussians.object_id.max()) + 1
         normal, offset = np.zeros((objects, 3)), np.zeros(objects)
         for k in range(objects):
