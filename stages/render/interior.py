@@ -13,9 +13,10 @@ a Gaussian of its own (as PhysGaussian renders its filled particles):
 Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
 surface Gaussians included, becomes a grain (:func:`grain_shapes`). A torn solid's
 grains are soft and round, of its share of the volume, in the colour it had. Sand and
-snow become hard grains one lattice spacing across, elongated and turned at random,
-each in the photograph's colour where its rest position projects (:func:`rest_ray_colours`:
-a two-coloured body's inside keeps the colour of the part it belongs to, so its heap
+snow become hard grains of about a lattice spacing, of varied sizes, elongated and turned at
+random, each moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`:
+a heap shows no lattice), each in the photograph's colour where its rest position projects
+(:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it belongs to, so its heap
 shows both), each a little brighter or darker at the same hue (:func:`grain_colours`).
 
 At rest the interior must stay hidden behind the surface, so that frame 0 is the
@@ -68,6 +69,10 @@ GRAIN_SHADE = 0.13
 """Spread (standard deviation) of the grains' brightness relative to their colour: measured on
 scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
 quarter of a grain against the mean over a few grains (0.19 at an eighth, 0.13 at a quarter)."""
+GRAIN_SIZES = (0.6, 1.3)
+"""Range of a granular grain's diameter over the lattice's grain (uniform, then scaled by 1 / sqrt of the
+mean square, so the grains cover on average the area the lattice's grain does): sand's grain sizes
+spread about twofold within a sieve fraction, and grains all of one size on a lattice read as scales."""
 GRAIN_ELONGATION = 1.5
 """A granular grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
 2 (a heap of round discs reads as bubbles, not sand)."""
@@ -127,12 +132,14 @@ def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarr
     """(P, 3, 3) covariance (m^2) and (P,) opacity of each particle as a grain of the material, once
     its material flows (Mixing).
 
-    Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY the size of the lattice: an
-    ellipsoid whose alpha is 1/2 on the surface of volume (4/3) pi r^3, r = GRAIN_SIGMA sqrt(2 ln 2)
-    spacing (so neighbours overlap and a heap is opaque), its long axis GRAIN_ELONGATION times its
-    two short ones, turned at random (seeded: the same for every run). Every grain is the same size
-    whatever volume its particle carries: a surface Gaussian on a side wall carries the volume the
-    closed body lacks (stages/simulate/fill.py) and would grow into a disc many grains wide.
+    Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY about the size of the lattice:
+    an ellipsoid whose alpha is 1/2 on the surface of volume (4/3) pi (s r)^3, r = GRAIN_SIGMA
+    sqrt(2 ln 2) spacing (so neighbours overlap and a heap is opaque) and s the grain's size, uniform
+    over GRAIN_SIZES scaled so that the mean of s^2 is 1 (the grains cover the area the lattice's
+    would), its long axis GRAIN_ELONGATION times its two short ones, turned at random (seeded: the
+    same for every run). A grain's size does not follow the volume its particle carries: a surface
+    Gaussian on a side wall carries the volume the closed body lacks (stages/simulate/fill.py) and
+    would grow into a disc many grains wide.
     Of the other materials, a round soft grain of the particle's own opacity and standard deviation
     GRAIN_SIGMA V^(1/3): a torn face reads as solid material, not as grains.
 
@@ -143,14 +150,36 @@ def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarr
     """
     granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
     opacity = np.where(granular, GRAIN_OPACITY, opacities)
+    low, high = GRAIN_SIZES
+    mean_square = (high ** 3 - low ** 3) / (3 * (high - low))  # of s uniform on [low, high]
+    sizes = np.random.default_rng(1).uniform(low, high, len(volumes)) / math.sqrt(mean_square)
     # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
-    half_alpha_radius = GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * np.where(np.isfinite(spacing), spacing, 0.0)
+    half_alpha_radius = (GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * sizes
+                         * np.where(np.isfinite(spacing), spacing, 0.0))
     hard_sigma = half_alpha_radius / math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
     axes = GRAIN_ELONGATION ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
     turns = Rotation.random(len(volumes), random_state=0).as_matrix()
     hard = np.einsum("pij,j,pkj->pik", turns, axes ** 2, turns) * hard_sigma[:, None, None] ** 2
     soft = np.eye(3) * (GRAIN_SIGMA * np.cbrt(volumes))[:, None, None] ** 2
     return np.where(granular[:, None, None], hard, soft), opacity
+
+
+def grain_offsets(spacing: np.ndarray, material_id: np.ndarray) -> np.ndarray:
+    """(P, 3) m: where a granular particle's grain is drawn, from its position, once its material
+    flows (Mixing): uniform over the lattice cell centred on it (seeded: the same for every run);
+    0 for the other materials and where there is no lattice (spacing inf).
+
+    The particles sit on the simulation's lattice, and a heap near the camera would show it as a
+    honeycomb of grains. A shift uniform over the cell puts each grain anywhere in its cell: the
+    centres' structure factor at every reciprocal lattice vector is then that of independent points,
+    |E exp(i k d)|^2 = prod sinc^2(k_j s / 2) = 0 (no lattice peak).
+
+    Args:
+        spacing: (P,) m (lattice_spacing); material_id: (P,) index into schemas.materials.PRESETS.
+    """
+    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR]) & np.isfinite(spacing)
+    shift = np.random.default_rng(2).uniform(-0.5, 0.5, (len(spacing), 3))
+    return np.where(granular[:, None], shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None], 0.0)
 
 
 def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray,

@@ -30,7 +30,7 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_shapes,
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_offsets, grain_shapes,
                        hidden_at_rest, lattice_spacing, rest_ray_colours, surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
@@ -51,7 +51,8 @@ class Particles(NamedTuple):
     """Every particle of the trajectories as rendered: the G Gaussians, then the fill particles
     (interior.py). Tensors (P, ...) on the render device.
 
-    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_covariances (P, 3, 3), m^2,
+    rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_offsets (P, 3), m, where a grain is
+    drawn from its particle (interior.grain_offsets); grain_covariances (P, 3, 3), m^2,
     grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
     its material flows (interior.Mixing): a soft round grain of its share of the volume in its own
     colour, or for sand and snow a hard grain of the lattice's size in the photograph's colour on its
@@ -66,6 +67,7 @@ class Particles(NamedTuple):
 
     rest_means: torch.Tensor
     rest_covariances: torch.Tensor
+    grain_offsets: torch.Tensor
     grain_covariances: torch.Tensor
     mixing: Mixing
     opacities: torch.Tensor
@@ -78,8 +80,9 @@ class Particles(NamedTuple):
     surface: torch.Tensor
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        """(P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,) surface weights of a frame
-        whose particles are at ``positions`` (P, 3) with deformation gradients ``F`` (P, 3, 3); call
+        """(P, 3) drawn positions (m), (P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,)
+        surface weights of a frame whose particles are at ``positions`` (P, 3) with deformation
+        gradients ``F`` (P, 3, 3); call
         once per frame, in order (Mixing keeps its past). The surface weight is 1 for a Gaussian that
         is still a patch of the photographed surface, falling to 0 as it turns into a grain of
         flowing material (whose colour then stands for the material, not for its place in the
@@ -88,7 +91,8 @@ class Particles(NamedTuple):
         shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
         colors = ((1 - mixed[:, None]) * self.colors + mixed[:, None] * self.grain_colors).clamp(0, 1)
         opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
-        return F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
+        drawn = positions + mixed[:, None] * self.grain_offsets.to(positions.dtype)
+        return drawn, F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
 
 
 def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, camera: splat.Camera,
@@ -126,6 +130,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     rest_means = torch.cat([means, fill_means])
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
+        grain_offsets=t(grain_offsets(spacing.cpu().numpy(), trajectories.material_id)),
         grain_covariances=torch.where(spacing.isfinite()[:, None, None], t(grain_shape).to(covariances.dtype),
                                       rest_covariances),
         mixing=Mixing(rest_means, trajectories.object_id, spacing),
@@ -159,7 +164,7 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
     with torch.no_grad():
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
-            covariances, opacities, colors, surface_weights = particles.at(F, means)
+            means, covariances, opacities, colors, surface_weights = particles.at(F, means)
             render = splat.rasterize(means, opacities, torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1),
                                      camera,
                                      covariances=covariances)

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact
 from schemas.scene import PhysicsConfig
-from stages.render.interior import EDGE_PX, GRAIN_SHADE, grain_colours, rest_ray_colours
+from stages.render.interior import EDGE_PX, GRAIN_SHADE, grain_colours, grain_offsets, rest_ray_colours
 from stages.render.render import render_video
 from stages.simulate.simulation import Simulation
 
@@ -160,3 +160,23 @@ def test_grain_shades_keep_the_hue():
     dark = colours.max(1) < 0.6  # no cap within the factors' +-2 GRAIN_SHADE
     assert abs(factor[dark, 0].std() / GRAIN_SHADE - 1) < 0.15
     np.testing.assert_array_equal(grain_colours(colours, np.full(4000, M.PRESETS.index("jelly"))), colours)
+
+
+def test_grains_show_no_lattice():
+    """Grains drawn from a cubic lattice of sand particles (spacing s) by grain_offsets lie anywhere in
+    their cells: the structure factor of their centres, |sum exp(i k x)|^2 / N, at the lattice's
+    reciprocal vectors k (2 pi / s along an axis, a face diagonal, a body diagonal) is that of
+    independent points (about 1, exponentially distributed), where the lattice itself gives N. Every
+    shift stays within the cell; jelly and a body with no lattice (spacing inf) are not shifted."""
+    s, n = 0.004, 16
+    lattice = s * np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    sand = np.full(len(lattice), M.PRESETS.index("sand"))
+    offsets = grain_offsets(np.full(len(lattice), s), sand)
+    assert np.abs(offsets).max() <= s / 2
+    for direction in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, -1], [1, 1, 1]):
+        k = 2 * np.pi / s * np.array(direction, float)
+        peak = lambda x: np.abs(np.exp(1j * x @ k).sum()) ** 2 / len(x)  # noqa: E731
+        assert peak(lattice) > 0.99 * len(lattice)
+        assert peak(lattice + offsets) < 15, f"a lattice peak along {direction}"
+    np.testing.assert_array_equal(grain_offsets(np.full(8, s), np.full(8, M.PRESETS.index("jelly"))), 0.0)
+    np.testing.assert_array_equal(grain_offsets(np.full(8, np.inf), np.full(8, M.PRESETS.index("sand"))), 0.0)
