@@ -28,3 +28,13 @@ def fibonacci_sphere(n: int, radius: float) -> np.ndarray:
     i = np.arange(n) + 0.5
     polar, azimuth = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
     return radius * np.stack([np.cos(azimuth) * np.sin(polar), np.sin(azimuth) * np.sin(polar), np.cos(polar)], 1)
+
+
+def sphere_surfels(n: int, radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """n flat Gaussians tangent to a sphere of ``radius`` m about the origin, spread evenly over it: unit
+    normals (n,3), scales (n,3) m (thin along the normal) and rotations (n,4) wxyz taking z onto the normal."""
+    normals = fibonacci_sphere(n, 1.0)
+    spacing = np.sqrt(4 * np.pi / n) * radius
+    rotations = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(n)], 1)
+    rotations /= np.linalg.norm(rotations, axis=1, keepdims=True)
+    return normals, np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations

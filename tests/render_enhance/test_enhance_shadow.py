@@ -9,6 +9,7 @@ from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from stages.enhance.flow import enhance_frames
 from stages.enhance.shadow import Ground
 from stages.reconstruct.background import inpaint_background
+from testing.particles import sphere_surfels
 
 W, H, FOCAL, PITCH_DEG = 160, 120, 200.0, 20.0
 RADIUS, FLOOR_Y = 0.08, 0.33  # world frame: y down along gravity, z away from the camera, horizontal
@@ -70,13 +71,7 @@ def scene_image(centre, shadowed: bool = True, supersampling: int = 3):
 
 
 def surfel_ball(photo, coverage, n: int = 5000) -> GaussiansArtifact:
-    golden = np.pi * (3 - np.sqrt(5))
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    normals = np.stack([np.sqrt(1 - z * z) * np.cos(golden * k), np.sqrt(1 - z * z) * np.sin(golden * k), z], 1)
-    spacing = np.sqrt(4 * np.pi / n) * RADIUS
-    quaternions = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(n)], 1)
-    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
+    normals, scales, quaternions = sphere_surfels(n, RADIUS)
     means = CENTRE + RADIUS * normals
     image = (means @ R.T) @ K.T
     uv = image[:, :2] / image[:, 2:]
@@ -86,7 +81,7 @@ def surfel_ball(photo, coverage, n: int = 5000) -> GaussiansArtifact:
     labels = (coverage > 0.5).astype(np.uint8)
     return GaussiansArtifact(
         K=K, world_to_camera=world_to_camera, width=W, height=H, means=means,
-        scales=np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations=quaternions,
+        scales=scales, rotations=quaternions,
         opacities=np.full(n, 0.95), colors=colours, object_id=np.zeros(n), photo=photo, mask=labels,
         background=inpaint_background(photo, labels), depth_prior=np.where(labels > 0, 1.0, np.nan),
         object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])

@@ -10,6 +10,7 @@ from stages.enhance.flow import enhance_frames
 from stages.enhance.relight import to_srgb
 from stages.enhance.unseen import mirrored_source, view_rays
 from stages.render.render import render_video
+from testing.particles import sphere_surfels
 
 SIZE, FOCAL, RADIUS, DISTANCE = 128, 300.0, 0.1, 1.0
 CENTRE = np.array([0.0, 0.0, DISTANCE])
@@ -49,18 +50,12 @@ def photograph(supersampling: int = 4) -> tuple[np.ndarray, np.ndarray]:
 def closed_ball(photo: np.ndarray, coverage: np.ndarray, n: int = 8000) -> GaussiansArtifact:
     """Surfels all around the ball, coloured as the reconstruction colours them: the front by the
     photograph, the back by the front it mirrors (across the plane z = DISTANCE)."""
-    golden = np.pi * (3 - np.sqrt(5))
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    normals = np.stack([np.sqrt(1 - z * z) * np.cos(golden * k), np.sqrt(1 - z * z) * np.sin(golden * k), z], 1)
-    spacing = np.sqrt(4 * np.pi / n) * RADIUS
-    quaternions = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(n)], 1)  # (0,0,1) -> normal
-    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
+    normals, scales, quaternions = sphere_surfels(n, RADIUS)
     front = normals * [1, 1, -1]
     front[:, 2] = -np.abs(normals[:, 2])
     return GaussiansArtifact(
         K=K, world_to_camera=np.eye(4), width=SIZE, height=SIZE, means=CENTRE + RADIUS * normals,
-        scales=np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations=quaternions,
+        scales=scales, rotations=quaternions,
         opacities=np.full(n, 0.95), colors=shaded(front) / 255.0, object_id=np.zeros(n), photo=photo,
         mask=(coverage > 0.5).astype(np.uint8), background=np.full((SIZE, SIZE, 3), 100, np.uint8),
         depth_prior=np.where(coverage > 0.5, DISTANCE - RADIUS, np.nan), object_volumes=np.full(1, np.nan),

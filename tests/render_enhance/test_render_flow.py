@@ -10,6 +10,7 @@ from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from stages.enhance.flow import band_limited_upsample, enhance_frames, photograph_at, sample_at
 from stages.render.render import render_camera, render_video
 from stages.render.source_map import map_moments, source_points, source_spread
+from testing.particles import sphere_surfels
 
 W, H, FOCAL, DEPTH = 48, 40, 60.0, 1.0
 
@@ -244,19 +245,13 @@ def surfel_sphere(n: int = 6000, radius_m: float = 0.1, distance_m: float = 1.0,
                   size: int = 96) -> GaussiansArtifact:
     """Surfels tangent to a sphere of radius_m, distance_m in front of the camera (they cover its far side
     too), textured; the photograph black, the camera's focal length ``focal`` px, its image size x size."""
-    golden = np.pi * (3 - np.sqrt(5))
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    normals = np.stack([np.sqrt(1 - z * z) * np.cos(golden * k), np.sqrt(1 - z * z) * np.sin(golden * k), z], 1)
+    normals, scales, quaternions = sphere_surfels(n, radius_m)
     centre = np.array([0.0, 0.0, distance_m])
-    spacing = np.sqrt(4 * np.pi / n) * radius_m
-    quaternions = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(n)], 1)  # (0,0,1) -> normal
-    quaternions /= np.linalg.norm(quaternions, axis=1, keepdims=True)
     K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]])
     colours = 0.5 + 0.4 * np.sin(40 * normals)  # any texture: the test reads source_uv, not colour
     return GaussiansArtifact(
         K=K, world_to_camera=np.eye(4), width=size, height=size, means=centre + radius_m * normals,
-        scales=np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations=quaternions,
+        scales=scales, rotations=quaternions,
         opacities=np.full(n, 0.9), colors=colours, object_id=np.zeros(n),
         photo=np.zeros((size, size, 3), np.uint8), mask=np.ones((size, size), np.uint8),
         background=np.zeros((size, size, 3), np.uint8), depth_prior=np.full((size, size), distance_m),
