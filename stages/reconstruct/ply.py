@@ -26,6 +26,19 @@ from .lift import Gaussians
 OPENGL_TO_CAMERA = Rotation.from_euler("x", 180, degrees=True)
 
 
+def opengl_to_camera(means: np.ndarray, rotations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Means (N,3) and rotations (N,4) wxyz of an OpenGL-framed cloud turned into the camera's axes."""
+    turned = OPENGL_TO_CAMERA * Rotation.from_quat(rotations, scalar_first=True)
+    return OPENGL_TO_CAMERA.apply(means), turned.as_quat(scalar_first=True)
+
+
+def mask_box(mask: np.ndarray) -> tuple[int, np.ndarray]:
+    """The larger side (px) of the bounding box of ``mask`` (H,W bool) and its centre (u, v, 1) (3,), px."""
+    rows, cols = np.nonzero(mask)
+    extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
+    return extent_px, np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
+
+
 def distance_for_extent(means: np.ndarray, focal: float, extent_px: float) -> float:
     """Camera-space depth (m) of the centre of ``means`` (N,3, centred) on the optical axis at which
     their projection is ``extent_px`` wide or high (the larger), ``focal`` in px."""
@@ -43,15 +56,12 @@ def distance_for_extent(means: np.ndarray, focal: float, extent_px: float) -> fl
 def place_ply(path: Path, mask: np.ndarray, K: np.ndarray, size_m: float, object_id: int = 0) -> Gaussians:
     """Gaussians of the PLY at ``path`` placed onto the object ``mask`` (H,W bool) of the camera ``K`` (3,3)."""
     cloud = read_ply(path)
-    means = OPENGL_TO_CAMERA.apply(cloud.means.astype(np.float64))
-    rotations = (OPENGL_TO_CAMERA * Rotation.from_quat(cloud.rotations, scalar_first=True)).as_quat(scalar_first=True)
+    means, rotations = opengl_to_camera(cloud.means.astype(np.float64), cloud.rotations)
     low, high = means.min(0), means.max(0)
     scale = size_m / float((high - low).max())
     means = (means - (low + high) / 2) * scale
-    rows, cols = np.nonzero(mask)
-    extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
+    extent_px, centre_px = mask_box(mask)
     distance = distance_for_extent(means, K[1, 1], extent_px)
-    centre_px = np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
     centre = np.linalg.inv(K) @ centre_px * distance  # on that ray, at camera-space depth `distance`
     count = len(means)
     return Gaussians(means + centre, cloud.scales.astype(np.float64) * scale, rotations,

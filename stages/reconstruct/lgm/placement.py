@@ -2,7 +2,7 @@
 
 Placement (the paper's Sec. 3.3 start): the object frame is OpenGL's with view 0
 facing the photograph, so the cloud turns 180 degrees about x into the camera's
-axes (``ply.OPENGL_TO_CAMERA``); it is scaled so that its largest extent (of the
+axes (``ply.opengl_to_camera``); it is scaled so that its largest extent (of the
 1st-99th percentile box of its means, robust to LGM's floaters) is size_m, and
 centred on the ray through the mask's bounding-box centre at the distance
 where it projects as large as the mask (``ply.distance_for_extent``). The depth
@@ -18,12 +18,11 @@ import math
 import numpy as np
 from scipy import ndimage
 from scipy.spatial import cKDTree
-from scipy.spatial.transform import Rotation
 
 from schemas.camera import project_points
 
 from ..lift import Gaussians
-from ..ply import OPENGL_TO_CAMERA, distance_for_extent
+from ..ply import distance_for_extent, mask_box, opengl_to_camera
 from .splatter import SplatterGaussians
 
 ROBUST_PERCENTILES = (1.0, 99.0)
@@ -65,16 +64,14 @@ def place(cloud: SplatterGaussians, mask: np.ndarray, K: np.ndarray, size_m: flo
           object_id: int = 0) -> Gaussians:
     """LGM's ``cloud`` in the camera ``K`` (3,3) on the object ``mask`` (H,W bool), size_m metres across, its
     front at the prior's camera-space depths ``front`` (H,W, NaN off the object)."""
-    means = OPENGL_TO_CAMERA.apply(cloud.means)
-    rotations = (OPENGL_TO_CAMERA * Rotation.from_quat(cloud.rotations, scalar_first=True)).as_quat(scalar_first=True)
+    means, rotations = opengl_to_camera(cloud.means, cloud.rotations)
     low, high = np.percentile(means, ROBUST_PERCENTILES, axis=0)
     scale = size_m / float((high - low).max())
     means = (means - (low + high) / 2) * scale
     core = np.all((means >= (low - (low + high) / 2) * scale) & (means <= (high - (low + high) / 2) * scale), axis=1)
-    rows, cols = np.nonzero(mask)
-    extent_px = max(cols.max() + 1 - cols.min(), rows.max() + 1 - rows.min())
+    extent_px, centre_px = mask_box(mask)
     distance = distance_for_extent(means[core], K[1, 1], extent_px)
-    ray = np.linalg.inv(K) @ np.array([(cols.min() + cols.max() + 1) / 2, (rows.min() + rows.max() + 1) / 2, 1.0])
+    ray = np.linalg.inv(K) @ centre_px
     means = means + ray * distance  # ray has z = 1: the centre at camera-space depth `distance`
     zbuffer, _ = nearest_depth(means, K, mask.shape)
     gap = (front - zbuffer)[mask & np.isfinite(front) & np.isfinite(zbuffer)]
