@@ -6,6 +6,8 @@ the intrinsics of gaussians.h5's /camera/K (and coarse.h5's), in pixels, with th
 """
 from __future__ import annotations
 
+import numpy as np
+
 # Depth (m) below which a point counts as on the camera plane: points there or behind it project
 # to far outside the picture instead of dividing by zero.
 MIN_DEPTH = 1e-9
@@ -18,3 +20,11 @@ def project_points(points, K):
     z = points[..., 2:3]
     z = z.clamp_min(MIN_DEPTH) if hasattr(z, "clamp_min") else z.clip(min=MIN_DEPTH)
     return points[..., :2] / z * K[[0, 1], [0, 1]] + K[:2, 2]
+
+
+def pixel_rays(K: np.ndarray, height: int, width: int) -> np.ndarray:
+    """Unit ray directions (H,W,3) float64, camera frame, through every pixel centre under intrinsics K (3,3)."""
+    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    uv1 = np.stack([j, i, np.ones_like(j)], axis=-1)
+    rays = uv1 @ np.linalg.inv(K).T
+    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)

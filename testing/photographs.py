@@ -15,7 +15,8 @@ import numpy as np
 
 from schemas.images import write_image
 
-from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays
+from schemas.camera import pixel_rays
+from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera
 
 
 @dataclass(frozen=True)

@@ -23,9 +23,10 @@ import cv2
 import numpy as np
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
+from schemas.camera import pixel_rays
 
 from .compositing import STILL_PX, resize_to
-from .unseen import MirrorPlanes, rest_in_camera, view_rays
+from .unseen import MirrorPlanes, rest_in_camera
 
 log = logging.getLogger("physmotion.enhance.shadow")
 
@@ -125,7 +126,7 @@ class Shadows:
         ground = Ground.of(gaussians)
         direction = towards_light(light, ground.down)
         planes = MirrorPlanes.of(gaussians)
-        rays = view_rays(coarse.K, h, w).astype(np.float64)
+        rays = pixel_rays(coarse.K, h, w)
         photo = resize_to(gaussians.photo, w, h).astype(np.float32).mean(-1)
         background = resize_to(gaussians.background, w, h).astype(np.float32).mean(-1)
         objects = resize_to((gaussians.mask > 0).astype(np.float32), w, h) > 0

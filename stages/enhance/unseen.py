@@ -29,6 +29,7 @@ import cv2
 import numpy as np
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
+from schemas.camera import pixel_rays
 
 from .compositing import STILL_PX, normalised_blur, sample_at
 from .relight import NORMAL_SMOOTHING, Relighting, Shading, smooth_normals, to_linear, to_srgb
@@ -72,13 +73,6 @@ def rest_in_camera(gaussians: GaussiansArtifact) -> tuple[np.ndarray, np.ndarray
     R, t = gaussians.world_to_camera[:3, :3], gaussians.world_to_camera[:3, 3]
     down = R @ np.array([0.0, 1.0, 0.0])  # the world's y runs along gravity
     return gaussians.means.astype(np.float64) @ R.T + t, down
-
-
-def view_rays(K: np.ndarray, h: int, w: int) -> np.ndarray:
-    """(h, w, 3) unit directions, camera frame, of the rays through the pixel centres of intrinsics K."""
-    rows, cols = np.indices((h, w), dtype=np.float64)
-    rays = np.stack([cols + 0.5, rows + 0.5, np.ones_like(cols)], -1) @ np.linalg.inv(K).T
-    return (rays / np.linalg.norm(rays, axis=-1, keepdims=True)).astype(np.float32)
 
 
 def facing(normals: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -130,7 +124,7 @@ def mirrored_source(uv: np.ndarray, front_distance: np.ndarray, rays: np.ndarray
         uv: (h', w', 2) source points at output resolution, NaN where none.
         front_distance: (h, w) distance (m) from the camera to the surface at rest at each output
             pixel (frame 0's depth / alpha), NaN off the objects.
-        rays: (h, w, 3) unit view rays of the output pixels (:func:`view_rays`).
+        rays: (h, w, 3) unit view rays of the output pixels (``schemas.camera.pixel_rays``).
         normal: (h', w', 3), offset: (h', w') each pixel's plane (its object's, :class:`MirrorPlanes`).
         K: (3, 3) output intrinsics.
     Returns:
@@ -256,7 +250,7 @@ class Continuation:
         on = coarse.alpha[0] > 0.5
         sigma = relighting.sigma_px if relighting else max(1.0, NORMAL_SMOOTHING * float(np.sqrt(max(on.sum(), 1))))
         rest_normals = relighting.rest_normals if relighting else smooth_normals(coarse.normal[0], coarse.alpha[0], sigma)
-        rays = view_rays(coarse.K, h, w)
+        rays = pixel_rays(coarse.K, h, w).astype(np.float32)
         albedo = Albedo.fit(photo, coverage, rest_normals, rays, relighting.shading if relighting else None)
         front_distance = np.where(on, coarse.depth[0] / np.maximum(coarse.alpha[0], 1e-6), np.nan)
         labels = cv2.resize(gaussians.mask, (w, h), interpolation=cv2.INTER_NEAREST)

@@ -29,8 +29,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial import ConvexHull, QhullError
 
+from schemas.camera import pixel_rays
+
 from .depth import ObjectDepth, aligned_front, medial_balls
-from .geometry import pixel_rays
 from .standing import NEAR_PX, StandingSolid, standing_solid
 
 log = logging.getLogger("physmotion.reconstruct")

@@ -15,7 +15,8 @@ import cv2
 import numpy as np
 from scipy import ndimage
 
-from .geometry import pixel_rays
+from schemas.camera import pixel_rays
+
 from .local_model import load_local_model
 
 

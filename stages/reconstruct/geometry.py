@@ -24,14 +24,6 @@ def working_size(width: int, height: int, resolution: int) -> tuple[int, int]:
     return w, max(1, round(height * w / width))
 
 
-def pixel_rays(K: np.ndarray, height: int, width: int) -> np.ndarray:
-    """Unit ray directions (H,W,3) in camera coordinates through every pixel centre."""
-    j, i = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-    uv1 = np.stack([j, i, np.ones_like(j)], axis=-1)
-    rays = uv1 @ np.linalg.inv(K).T
-    return rays / np.linalg.norm(rays, axis=-1, keepdims=True)
-
-
 def orbit_world_to_camera(center: np.ndarray, azimuth_deg: float) -> np.ndarray:
     """world_to_camera (4,4) of the input camera turned by ``azimuth_deg`` about the vertical
     axis (y) through ``center`` (3,), metres.

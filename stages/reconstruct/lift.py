@@ -13,8 +13,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
+from schemas.camera import pixel_rays
+
 from .depth import ObjectDepth
-from .geometry import pixel_rays
 
 SIGMA_PER_SPACING = 0.6
 """Surfel standard deviation per sample spacing: neighbours overlap, so the sheet has no gaps."""

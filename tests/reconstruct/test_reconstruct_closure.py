@@ -12,7 +12,8 @@ from scipy.spatial import ConvexHull
 
 from stages.reconstruct.closure import ball_depths, down_direction, object_depths
 from stages.reconstruct.depth import ObjectDepth
-from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
+from schemas.camera import pixel_rays
+from stages.reconstruct.geometry import intrinsics_from_fov
 from testing.photographs import Capsule, TurnedBox, UprightCylinder, photograph, standing_axes
 
 

@@ -4,7 +4,8 @@ import pytest
 
 from stages.reconstruct.closure import object_depths
 from stages.reconstruct.depth import ObjectDepth, depth_prior_image, inflation_half_thickness, largest_extent_px
-from stages.reconstruct.geometry import intrinsics_from_fov, pixel_rays
+from schemas.camera import pixel_rays
+from stages.reconstruct.geometry import intrinsics_from_fov
 
 
 def disc(height, width, centre, radius):

@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera, pixel_rays, working_size
+from schemas.camera import pixel_rays
+from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera, working_size
 
 
 def test_vertical_fov_spans_the_image_height():

@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
+from schemas.camera import pixel_rays
 from stages.enhance.flow import enhance_frames
 from stages.enhance.relight import to_srgb
-from stages.enhance.unseen import mirrored_source, view_rays
+from stages.enhance.unseen import mirrored_source
 from stages.render.render import render_video
 from testing.particles import sphere_surfels
 
@@ -116,7 +117,7 @@ def test_mirrored_source_is_where_the_photograph_saw_the_mirror_image():
     B = CENTRE + RADIUS * back
     mirror = B * [1, 1, -1] + [0, 0, 2 * DISTANCE]
     project = lambda x: x[:, :2] / x[:, 2:] * FOCAL + SIZE / 2  # noqa: E731
-    rays = view_rays(K, SIZE, SIZE).astype(np.float64)
+    rays = pixel_rays(K, SIZE, SIZE)
     along = rays @ CENTRE
     reach = along ** 2 - (CENTRE @ CENTRE - RADIUS ** 2)
     front = np.where(reach > 0, along - np.sqrt(np.maximum(reach, 0)), np.nan)
