@@ -267,13 +267,22 @@ def test_enclosed_volume_of_sampled_surfaces():
     assert enclosed_volume(turned) == pytest.approx(np.prod(sides), rel=0.1)
 
 
+def scene_with_prior(tmp_path, prior: str, shape=None, iterations: int = 1, enhance=None):
+    """A 64x48 scene.yaml under tmp_path of ``shape`` (a tilted capsule by default) with reconstruct.prior
+    ``prior`` and, where given, the ``enhance`` section."""
+    scene = write_scene(tmp_path / "scene", shape or Capsule.tilted(), width=64, height=48, iterations=iterations)
+    config = yaml.safe_load(scene.read_text())
+    config["reconstruct"]["prior"] = prior
+    if enhance is not None:
+        config["enhance"] = enhance
+    scene.write_text(yaml.safe_dump(config))
+    return scene
+
+
 def test_prior_lgm_runs_in_pm_reconstruct(tiny, tmp_path, monkeypatch):
     lgm_folder, multiview_folder = tiny
     monkeypatch.setattr(prior_module, "DIFFUSION_STEPS", 2)
-    scene = write_scene(tmp_path / "scene", Capsule.tilted(distance=0.6), width=64, height=48, iterations=4)
-    config = yaml.safe_load(scene.read_text())
-    config["reconstruct"]["prior"] = "lgm"
-    scene.write_text(yaml.safe_dump(config))
+    scene = scene_with_prior(tmp_path, "lgm", Capsule.tilted(distance=0.6), iterations=4)
     out = tmp_path / "gaussians.h5"
     main(["--scene", str(scene), "--out", str(out), "--device", "cpu", "--lgm-model", str(lgm_folder),
           "--multiview-model", str(multiview_folder)])
@@ -304,10 +313,7 @@ def test_prior_lgm_runs_in_pm_reconstruct(tiny, tmp_path, monkeypatch):
 
 
 def test_prior_lgm_without_weights_exits_2_saying_what_it_needs(tmp_path, capsys):
-    scene = write_scene(tmp_path / "scene", Capsule.tilted(), width=64, height=48, iterations=1)
-    config = yaml.safe_load(scene.read_text())
-    config["reconstruct"]["prior"] = "lgm"
-    scene.write_text(yaml.safe_dump(config))
+    scene = scene_with_prior(tmp_path, "lgm")
     with pytest.raises(SystemExit) as stopped:
         main(["--scene", str(scene), "--out", str(tmp_path / "g.h5"), "--device", "cpu"])
     assert stopped.value.code == 2
@@ -321,11 +327,7 @@ def test_prior_lgm_without_weights_exits_2_saying_what_it_needs(tmp_path, capsys
 def test_the_learned_colours_show_on_unseen_surfaces_unless_the_scene_says(tmp_path, given, prior, shown):
     from stages.enhance.cli import hidden_surfaces
 
-    scene = write_scene(tmp_path / "scene", Capsule.tilted(), width=64, height=48, iterations=1)
-    config = yaml.safe_load(scene.read_text())
-    config["reconstruct"]["prior"] = prior
-    config["enhance"] = given
-    scene.write_text(yaml.safe_dump(config))
+    scene = scene_with_prior(tmp_path, prior, enhance=given)
     assert hidden_surfaces(load_scene(scene)) == shown
 
 
