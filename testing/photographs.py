@@ -13,11 +13,18 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from schemas.images import write_image
-
 from schemas.camera import pixel_rays
+from schemas.images import write_image
 from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera
 
+
+
+def sphere_hits(rays: np.ndarray, centre: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Where unit rays t * rays (...,3) from the camera first meet the sphere about ``centre`` (3,) m of
+    ``radius`` m: t (...) m, the nearer root (finite everywhere), and whether they meet it (...) bool."""
+    along = rays @ centre
+    reach = along ** 2 - (centre @ centre - radius ** 2)
+    return along - np.sqrt(np.maximum(reach, 0)), reach > 0
 
 @dataclass(frozen=True)
 class Capsule:

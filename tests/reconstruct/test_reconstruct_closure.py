@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
 
+from schemas.camera import pixel_rays
 from stages.reconstruct.closure import ball_depths, down_direction, object_depths
 from stages.reconstruct.depth import ObjectDepth
-from schemas.camera import pixel_rays
 from stages.reconstruct.geometry import intrinsics_from_fov
 from testing.photographs import Capsule, TurnedBox, UprightCylinder, photograph, standing_axes
 

@@ -2,10 +2,11 @@
 import numpy as np
 import pytest
 
+from schemas.camera import pixel_rays
 from stages.reconstruct.closure import object_depths
 from stages.reconstruct.depth import ObjectDepth, depth_prior_image, inflation_half_thickness, largest_extent_px
-from schemas.camera import pixel_rays
 from stages.reconstruct.geometry import intrinsics_from_fov
+from testing.photographs import sphere_hits
 
 
 def disc(height, width, centre, radius):
@@ -81,10 +82,7 @@ def test_sphere_prior_is_close_to_a_ray_cast_sphere_and_has_size_m():
     K = intrinsics_from_fov(40, width, height)
     rays = pixel_rays(K, height, width)
     centre = np.array([0.05, -0.02, distance])
-    b = rays @ centre
-    disc_term = b ** 2 - (centre @ centre - radius_m ** 2)
-    mask = disc_term > 0
-    truth = b - np.sqrt(np.where(mask, disc_term, 0))
+    truth, mask = sphere_hits(rays, centre, radius_m)
     depths = object_depths(mask.astype(np.uint8), K, [2 * radius_m], 0.0)
     thickness = np.nanmax(depths[0].back) - np.nanmin(depths[0].front)
     assert thickness == pytest.approx(2 * radius_m, rel=0.07)  # the silhouette is 40 px: +-1 px each side

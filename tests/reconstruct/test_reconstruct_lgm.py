@@ -14,8 +14,8 @@ from safetensors.torch import load_file, save_file
 import splat
 from schemas import InputError, load_scene
 from schemas.artifacts import GaussiansArtifact, read_artifact
-from stages.reconstruct.cli import main
 from schemas.camera import pixel_rays
+from stages.reconstruct.cli import main
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lgm import prior as prior_module
 from stages.reconstruct.lgm.loading import (PUBLISHED_MULTIVIEW_UNET, find_lgm, find_multiview, load_lgm,

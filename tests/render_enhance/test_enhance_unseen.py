@@ -12,6 +12,7 @@ from stages.enhance.relight import to_srgb
 from stages.enhance.unseen import mirrored_source
 from stages.render.render import render_video
 from testing.particles import sphere_surfels
+from testing.photographs import sphere_hits
 
 SIZE, FOCAL, RADIUS, DISTANCE = 128, 300.0, 0.1, 1.0
 CENTRE = np.array([0.0, 0.0, DISTANCE])
@@ -38,10 +39,8 @@ def photograph(supersampling: int = 4) -> tuple[np.ndarray, np.ndarray]:
     rays = np.stack([(cols + 0.5) / supersampling - SIZE / 2, (rows + 0.5) / supersampling - SIZE / 2,
                      np.full(cols.shape, FOCAL)], -1)
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    along = rays @ CENTRE
-    reach = along ** 2 - (CENTRE @ CENTRE - RADIUS ** 2)
-    on = reach > 0
-    normals = (rays * (along - np.sqrt(np.maximum(reach, 0)))[..., None] - CENTRE) / RADIUS
+    distance, on = sphere_hits(rays, CENTRE, RADIUS)
+    normals = (rays * distance[..., None] - CENTRE) / RADIUS
     background = 100 + 20 * np.sin(cols / supersampling / 3.0)[..., None] * np.ones(3)
     image = np.where(on[..., None], shaded(normals), background)
     image = image.reshape(SIZE, supersampling, SIZE, supersampling, 3).mean((1, 3))

@@ -6,6 +6,7 @@ from scipy.spatial.transform import Rotation
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 from stages.enhance.flow import enhance_frames
 from stages.enhance.relight import Relighting, fit_shading, to_linear, to_srgb
+from testing.photographs import sphere_hits
 
 SIZE, FOCAL = 96, 120.0
 CENTRE, RADIUS = np.array([0.0, 0.0, 3.0]), 0.8
@@ -19,9 +20,8 @@ def sphere():
     rows, cols = np.indices((SIZE, SIZE), dtype=np.float64)
     rays = np.stack([(cols + 0.5 - SIZE / 2) / FOCAL, (rows + 0.5 - SIZE / 2) / FOCAL, np.ones_like(cols)], -1)
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    along = rays @ CENTRE
-    disc = along ** 2 - (CENTRE @ CENTRE - RADIUS ** 2)
-    distance = np.where(disc > 0, along - np.sqrt(np.maximum(disc, 0)), np.nan)
+    distance, met = sphere_hits(rays, CENTRE, RADIUS)
+    distance = np.where(met, distance, np.nan)
     normals = (rays * distance[..., None] - CENTRE) / RADIUS
     return distance, normals
 

@@ -11,6 +11,7 @@ from stages.enhance.flow import band_limited_upsample, enhance_frames, photograp
 from stages.render.render import render_camera, render_video
 from stages.render.source_map import map_moments, source_points, source_spread
 from testing.particles import sphere_surfels
+from testing.photographs import sphere_hits
 
 W, H, FOCAL, DEPTH = 48, 40, 60.0, 1.0
 
@@ -281,15 +282,14 @@ def test_turned_sphere_reads_the_photograph_where_its_surface_was():
     rows, cols = np.indices((size, size))
     rays = np.stack([(cols + 0.5 - size / 2), (rows + 0.5 - size / 2), np.full((size, size), gaussians.K[0, 0])], -1)
     rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    along = rays @ centre
-    reach = along ** 2 - (centre @ centre - radius ** 2)
-    hit = rays * (along - np.sqrt(np.maximum(reach, 0)))[..., None]
+    distance, met = sphere_hits(rays, centre, radius)
+    hit = rays * distance[..., None]
     rest = (hit - centre) @ turn + centre  # turn^-1 = turn^T, applied to row vectors
     expected = rest[..., :2] / rest[..., 2:] * gaussians.K[0, 0] + size / 2
     facing_now = -((hit - centre) / radius * rays).sum(-1)
     facing_at_rest = -((rest - centre) / radius * rest / np.linalg.norm(rest, axis=-1, keepdims=True)).sum(-1)
     # away from the limb now and at rest, where a pixel's footprint spans a strip of the surface
-    region = (reach > 0) & (facing_now > 0.5) & (facing_at_rest > 0.5) & (coarse.alpha[1] > 0.99)
+    region = met & (facing_now > 0.5) & (facing_at_rest > 0.5) & (coarse.alpha[1] > 0.99)
     assert region.sum() > 300
     error = np.linalg.norm(coarse.source_uv[1][region] - expected[region], axis=-1)
     assert np.median(error) < 0.05 and error.max() < 0.2, f"median {np.median(error):.2f} px, max {error.max():.2f} px"
