@@ -36,6 +36,10 @@ from .rays import AZIMUTHS_DEG, ELEVATION_DEG, orbit_pose
 INPUT_VIEW_FRAME = 1
 """ImageDream's frames sit at azimuths 0, 90, 180, 270 of its own frame; the one at 90 faces the photograph, so
 LGM's views (input first) are frames 1, 2, 3, 0."""
+DIFFUSION_STEPS = 30
+"""DDIM steps of ImageDream's sampling (its published setting)."""
+GUIDANCE = 5.0
+"""Classifier-free guidance scale on image and text together (ImageDream's published setting)."""
 
 
 def frame_cameras(elevation_deg: float = ELEVATION_DEG, with_image: bool = True) -> torch.Tensor:
@@ -321,12 +325,12 @@ class MultiViewModels:
 
 
 @torch.no_grad()
-def sample_views(models: MultiViewModels, image: np.ndarray, steps: int = 30, guidance: float = 5.0,
+def sample_views(models: MultiViewModels, image: np.ndarray, steps: int = DIFFUSION_STEPS, guidance: float = GUIDANCE,
                  size: int = 256, seed: int = 0, progress: Optional[Callable[[int, int], None]] = None) -> np.ndarray:
     """Four views (4, size, size, 3) float32 in [0,1] of the object in ``image`` (H,W,3 float32 in [0,1], the
     object centred on white), LGM's order: the view facing the photograph, then azimuths 90, 180, 270.
 
-    ImageDream's settings: an empty prompt, ``guidance`` 5 on image and text together, ``steps`` DDIM steps."""
+    ImageDream's settings: an empty prompt, ``guidance`` on image and text together, ``steps`` DDIM steps."""
     unet, vae = models.unet, models.vae
     device, dtype = unet.device, unet.dtype
     frames = len(AZIMUTHS_DEG) + 1

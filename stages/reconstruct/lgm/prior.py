@@ -16,7 +16,7 @@ from schemas import InputError
 
 from ..lift import Gaussians
 from .loading import find_lgm, find_multiview, load_lgm, load_multiview
-from .multiview import MultiViewModels, sample_views
+from .multiview import DIFFUSION_STEPS, GUIDANCE, MultiViewModels, sample_views
 from .placement import enclosed_volume, place, seen_from_camera
 from .rays import plucker_embedding, view_poses
 from .splatter import decode, prune
@@ -28,8 +28,7 @@ BORDER = 0.2
 """The object's bounding box fills the view but this share on each side (LGM's and ImageDream's inputs)."""
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
-DIFFUSION_STEPS = 30
-GUIDANCE = 5.0
+"""Per-channel mean and standard deviation of ImageNet's RGB in [0,1], by which LGM's input is normalised."""
 MIN_GAUSSIANS = 4
 """Fewer placed Gaussians than this enclose no volume."""
 
