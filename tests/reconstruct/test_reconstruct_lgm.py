@@ -18,8 +18,7 @@ from schemas.camera import pixel_rays
 from stages.reconstruct.cli import main
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lgm import prior as prior_module
-from stages.reconstruct.lgm.loading import (PUBLISHED_MULTIVIEW_UNET, find_lgm, find_multiview, load_lgm,
-                                            load_multiview, meta_shapes)
+from stages.reconstruct.lgm.loading import find_lgm, find_multiview, load_lgm, load_multiview, meta_shapes
 from stages.reconstruct.lgm.multiview import MultiViewUNetModel, frame_cameras, sample_views
 from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place, seen_from_camera
 from stages.reconstruct.lgm.rays import AZIMUTHS_DEG, CAMERA_RADIUS, FOVY_DEG, plucker_embedding, view_poses
@@ -56,7 +55,7 @@ def test_published_architectures_have_the_checkpoints_names_and_shapes():
     assert lgm == published_shapes("lgm_big_keys.txt")
     assert 414e6 < sum(math.prod(s) for s in lgm.values()) < 416e6  # LGM's 415 M parameters
     assert LGMConfig().splat_size == 128
-    unet = meta_shapes(lambda: MultiViewUNetModel(**PUBLISHED_MULTIVIEW_UNET))
+    unet = meta_shapes(MultiViewUNetModel)
     assert unet == published_shapes("imagedream_unet_keys.txt")
 
 

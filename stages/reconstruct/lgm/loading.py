@@ -41,9 +41,7 @@ MULTIVIEW_COMPONENTS = {
 MULTIVIEW_UNET_KEYS = ("image_size", "in_channels", "out_channels", "model_channels", "num_res_blocks",
                        "attention_resolutions", "channel_mult", "num_head_channels", "transformer_depth",
                        "context_dim", "camera_dim", "ip_dim")
-PUBLISHED_MULTIVIEW_UNET = dict(image_size=32, in_channels=4, out_channels=4, model_channels=320, num_res_blocks=2,
-                                attention_resolutions=[4, 2, 1], channel_mult=[1, 2, 4, 4], num_head_channels=64,
-                                transformer_depth=1, context_dim=1024, camera_dim=16, ip_dim=16)
+"""The keys a published ImageDream unet/config.json holds: a folder whose config lacks one is not ImageDream's."""
 LGM_HOWTO = (f"download the LGM checkpoint on a machine with network (`huggingface-cli download {LGM_REPO} "
              f"{LGM_FILES[0]} --local-dir DIR`), copy DIR here and pass --lgm-model DIR or set ${LGM_ENV}=DIR; "
              "or use reconstruct.prior: symmetric, which needs no weights")
