@@ -1,6 +1,7 @@
 """Helpers for tests and benchmarks only, shipped in no install or stage image.
 
 photographs    ray-cast shapes of known volume, inertia and colour, photographed by a pinhole camera
-particles      Gaussians on the surfaces of boxes and spheres, for the simulator
+particles      Gaussians on the surfaces of boxes and spheres, for the simulator and the renderer
 tiny_diffusion a Stable-Diffusion-2.1-shaped model with random weights (no downloads)
+tiny_lgm       LGM and ImageDream of the published architectures, scaled down, with random weights
 """
