@@ -1,8 +1,10 @@
 """A known 3D shape photographed by a pinhole camera: the ground truth for tests and benchmarks/quality.py.
 
-The shape is a capsule (a cylinder with hemispherical caps) tilted in the
-image plane, textured with coloured stripes along its axis. Ray casting is
-sphere tracing of its signed distance, in float64 numpy.
+The shapes are a capsule (a cylinder with hemispherical caps) tilted in the
+image plane, textured with coloured stripes along its axis, and the standing
+solids (an upright cylinder, a box, a turned box); sphere_hits intersects rays
+with a sphere analytically. Ray casting is sphere tracing of a shape's signed
+distance, in float64 numpy.
 """
 from __future__ import annotations
 
@@ -18,13 +20,13 @@ from schemas.images import write_image
 from stages.reconstruct.geometry import intrinsics_from_fov, orbit_world_to_camera
 
 
-
 def sphere_hits(rays: np.ndarray, centre: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Where unit rays t * rays (...,3) from the camera first meet the sphere about ``centre`` (3,) m of
     ``radius`` m: t (...) m, the nearer root (finite everywhere), and whether they meet it (...) bool."""
     along = rays @ centre
     reach = along ** 2 - (centre @ centre - radius ** 2)
     return along - np.sqrt(np.maximum(reach, 0)), reach > 0
+
 
 @dataclass(frozen=True)
 class Capsule:
