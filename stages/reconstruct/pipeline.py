@@ -33,9 +33,9 @@ MAX_PHOTO_PX = 4096
 20000 x 20000 photograph took minutes and 4.7 GB at full size with no word in the log, while the
 optimisation works at reconstruct.resolution (at most 2048) and the video at render.width (at most 4096)."""
 NEAR_PLANE_M = float(NEAR_PLANE)
-# An object spanning this much of the view (degrees) and still reaching the near plane is a field of view
-# wider than the photograph's, not a wrong size.
 WIDE_SPAN_DEG = 90.0
+"""An object spanning this much of the view (degrees) and still reaching the near plane is a field of view
+wider than the photograph's, not a wrong size."""
 MAX_GAUSSIANS = 30000
 """Initial Gaussians of all objects at most: keeps 600 iterations at 256 px within about 3 minutes
 on 2 CPU cores (benchmarks/RESULTS.md); larger objects are sampled every 2nd, 3rd... pixel."""
