@@ -39,7 +39,8 @@ _WRITE_ORDER = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2", "
 
 @dataclass
 class GaussianCloud:
-    """Gaussians as physmotion holds them (DESIGN.md, Conventions); float32 numpy arrays.
+    """Gaussians as physmotion holds them (DESIGN.md, Conventions), in the frame of whoever made them
+    (LGM's are OpenGL-style); float numpy arrays (read_ply gives float32).
 
     means (G, 3) metres; scales (G, 3) linear standard deviations, metres;
     rotations (G, 4) unit quaternions (w, x, y, z); opacities (G,) in [0, 1];
@@ -51,6 +52,14 @@ class GaussianCloud:
     rotations: np.ndarray
     opacities: np.ndarray
     colors: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.means)
+
+    def select(self, keep: np.ndarray) -> "GaussianCloud":
+        """The Gaussians ``keep`` (G,) bool or indices picks."""
+        return GaussianCloud(self.means[keep], self.scales[keep], self.rotations[keep], self.opacities[keep],
+                             self.colors[keep])
 
 
 def read_ply(path: str | Path) -> GaussianCloud:

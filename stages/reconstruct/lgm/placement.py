@@ -20,10 +20,10 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from schemas.camera import project_points
+from schemas.ply import GaussianCloud
 
 from ..lift import Gaussians
 from ..ply import distance_for_extent, mask_box, opengl_to_camera
-from .splatter import SplatterGaussians
 
 ROBUST_PERCENTILES = (1.0, 99.0)
 CARVE_MARGIN = 0.02
@@ -60,7 +60,7 @@ def nearest_depth(means: np.ndarray, K: np.ndarray, shape: tuple[int, int]) -> t
     return zbuffer.reshape(shape), index
 
 
-def place(cloud: SplatterGaussians, mask: np.ndarray, K: np.ndarray, size_m: float, front: np.ndarray,
+def place(cloud: GaussianCloud, mask: np.ndarray, K: np.ndarray, size_m: float, front: np.ndarray,
           object_id: int = 0) -> Gaussians:
     """LGM's ``cloud`` in the camera ``K`` (3,3) on the object ``mask`` (H,W bool), size_m metres across, its
     front at the prior's camera-space depths ``front`` (H,W, NaN off the object)."""
