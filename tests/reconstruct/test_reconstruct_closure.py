@@ -57,6 +57,16 @@ def principal_moments(points: np.ndarray, masses: np.ndarray) -> np.ndarray:
     return np.linalg.eigvalsh(inertia)
 
 
+def reconstructed_body(shape, pitch: float, width: int):
+    """Intrinsics K (3,3) of a 40-degree camera ``width`` x 3/4 ``width`` px, the closure's depth of ``shape``
+    photographed by it pitched ``pitch`` degrees, and that body's samples (points (N,3) m, volumes (N,) m^3)."""
+    height = width * 3 // 4
+    K = intrinsics_from_fov(40, width, height)
+    mask = photograph(shape, K, np.eye(4), width, height).mask
+    depth = object_depths(mask.astype(np.uint8), K, [shape.size_m], pitch)[0]
+    return (K, depth, *body_samples(depth, K))
+
+
 @pytest.mark.parametrize("pitch", [0.0, 10.0, 30.0])
 @pytest.mark.parametrize("width", [128, 256])
 def test_a_photographed_ball_becomes_a_ball_that_stands_on_its_lowest_point(pitch, width):
@@ -64,12 +74,8 @@ def test_a_photographed_ball_becomes_a_ball_that_stands_on_its_lowest_point(pitc
     moments within 5 %, and its lowest point lies within 2 % of its size of under its centre of mass along
     gravity, whatever the pitch (mirrored about a plane across the optical axis, a pitched ball's lowest
     points lay 5 mm of 100 off)."""
-    height = width * 3 // 4
-    K = intrinsics_from_fov(40, width, height)
     ball = Capsule(np.array([0.0, 0.1, 0.6]), np.array([1e-6, 0.0, 0.0]), 0.06)
-    mask = photograph(ball, K, np.eye(4), width, height).mask
-    depth = object_depths(mask.astype(np.uint8), K, [ball.size_m], pitch)[0]
-    points, volumes = body_samples(depth, K)
+    K, depth, points, volumes = reconstructed_body(ball, pitch, width)
     assert volumes.sum() == pytest.approx(ball.volume, rel=0.03)
     np.testing.assert_allclose(principal_moments(points, 1000 * volumes), ball.principal_moments(1000), rtol=0.05)
     down = down_direction(pitch)
@@ -128,11 +134,7 @@ def test_a_photographed_standing_body_is_reconstructed_whole(name, width):
     along the view, an extent 1 % off moves a 12 cm body 0.6 m away by 5 % of its size)."""
     pitch, make = STANDING[name]
     shape = make(pitch)
-    height = width * 3 // 4
-    K = intrinsics_from_fov(40, width, height)
-    mask = photograph(shape, K, np.eye(4), width, height).mask
-    depth = object_depths(mask.astype(np.uint8), K, [shape.size_m], pitch)[0]
-    points, volumes = body_samples(depth, K)
+    _, _, points, volumes = reconstructed_body(shape, pitch, width)
     assert volumes.sum() == pytest.approx(shape.volume, rel=0.05)
     np.testing.assert_allclose(principal_moments(points, 1000 * volumes), shape.principal_moments(1000), rtol=0.10)
     centre = volumes @ points / volumes.sum()
