@@ -104,7 +104,6 @@ def test_grains_are_the_size_of_the_lattice(heap):
     rgb, solid = coarse.rgb[-1].astype(np.int16), coarse.alpha[-1] > 0.99
     same = lambda a, b: (np.abs(a - b).max(-1) <= 1)  # noqa: E731
     # flat patches: pixels joined to a right or lower neighbour of the same colour
-    joined = np.zeros(solid.shape, np.uint8)
     right = same(rgb[:, 1:], rgb[:, :-1]) & solid[:, 1:] & solid[:, :-1]
     down = same(rgb[1:], rgb[:-1]) & solid[1:] & solid[:-1]
     edges = [(r * SIZE + c, r * SIZE + c + 1) for r, c in zip(*np.nonzero(right))]
