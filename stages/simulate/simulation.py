@@ -241,7 +241,7 @@ class Simulation:
         if cause == "physics.conditions":
             return "lower the conditions' velocities and forces"
         if cause == "physics.gravity":
-            return (f"give physics.gravity a magnitude nearer 9.81 m/s^2 (a frame of free fall sets the substep), "
+            return ("give physics.gravity a magnitude nearer 9.81 m/s^2 (a frame of free fall sets the substep), "
                     "or raise physics.max_substeps_per_frame if you mean it")
         return ("lower that youngs_modulus or raise its density (the elastic wave speed sqrt(E / density) sets "
                 "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
