@@ -124,9 +124,12 @@ def refuse_overwriting(outputs: dict[str, Path], inputs: dict[str, Path]) -> Non
     """
     seen = list(inputs.items())
     for flag, path in outputs.items():
-        if Path(path).is_dir():
+        if Path(path).is_dir() and flag.startswith("-"):
             raise InputError(path, flag, f"{flag} names a folder, where this program writes a file",
                              f"give {flag} the path of the file to write, such as {Path(path) / Path(path).name}")
+        if Path(path).is_dir():  # a file the program names itself, beside its output
+            raise InputError(path, flag, f"a folder stands where this program writes {flag}",
+                             "move that folder away, or give the output another folder")
         for other, given in seen:
             if given is not None and same_file(path, given):
                 raise InputError(path, flag, f"{flag} names the same file as {other}, which this program "
