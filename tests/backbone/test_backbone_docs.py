@@ -30,3 +30,12 @@ def test_decision_records_have_their_sections_and_every_link_resolves():
     for doc in [ROOT / "docs" / "ARCHITECTURE.md", ROOT / "README.md", DECISIONS / "README.md", *records]:
         for name in re.findall(r"\b(\d{4}-[a-z0-9-]+\.md)", doc.read_text()):
             assert (DECISIONS / name).exists(), f"{doc.name} names docs/decisions/{name}, which does not exist"
+
+
+def test_the_commit_msg_hook_refuses_subjects_over_72_characters(tmp_path):
+    hook = ROOT / ".githooks" / "commit-msg"
+    for subject, refused in [("s" * 72, False), ("s" * 73, True)]:
+        message = tmp_path / "message"
+        message.write_text(f"{subject}\n\nA body of any length, " + "long " * 40 + "\n")
+        run = subprocess.run([str(hook), str(message)], capture_output=True, text=True)
+        assert (run.returncode != 0) == refused, (len(subject), run.stderr)
