@@ -100,16 +100,17 @@ def read_figures(path: Path) -> dict:
 
 def write_figures(name: str, title: str, description: str, command: str, columns: Sequence[str],
                   rows: Iterable[Sequence], *, notes: Sequence[str] = (), device: str = "cpu", merge_on: int = 0,
-                  results_dir: Path = RESULTS_DIR, report: bool = True) -> Path:
+                  results_dir: Path = RESULTS_DIR, report: bool = True, measured_commit: str = "") -> Path:
     """Write benchmarks/results/<name>.json and regenerate RESULTS.md from every such file.
 
     Cells are written as strings (format numbers before). ``merge_on`` > 0: the table collects rows
     from several runs (one scene or model per run): rows already in the file whose first ``merge_on``
     cells match no new row's are kept with the file's notes, and a last column names each row's commit.
+    ``measured_commit``: the commit measured, where it is not the checkout's (a clone made earlier).
     """
     columns, rows = [str(c) for c in columns], [[str(c) for c in row] for row in rows]
     notes = [" ".join(str(n).split()) for n in notes]
-    head = commit()
+    head = measured_commit or commit()
     path = Path(results_dir) / f"{name}.json"
     if merge_on:
         columns, rows = columns + [COMMIT_COLUMN], [row + [head] for row in rows]

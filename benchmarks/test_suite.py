@@ -111,12 +111,13 @@ def main() -> None:
         "the pytest run and the whole make command, in minutes.",
         command, ["passed", "skipped", "failed", "pytest", "make test"],
         [[passed, counts["skipped"], counts["failures"] + counts["errors"], minutes(counts["time"]), minutes(wall)]],
-        notes=[f"With {setup} and {cache}."])
+        notes=[f"With {setup} and {cache}."], measured_commit=head.split("+")[0])
     write_figures(
         "test_suite_slowest", f"The {SLOWEST} slowest tests" + part,
         "The tests of the run above that took longest, setup, call and teardown together (on a worker that shares "
         "the CPU with the other), in seconds.",
-        command, ["test", "s", "outcome"], [[name, f"{seconds:.1f}", outcome] for name, seconds, outcome in slowest])
+        command, ["test", "s", "outcome"], [[name, f"{seconds:.1f}", outcome] for name, seconds, outcome in slowest],
+        measured_commit=head.split("+")[0])
 
 
 if __name__ == "__main__":
