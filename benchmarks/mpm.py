@@ -50,6 +50,19 @@ def cube(n_particles: int, dx: float) -> np.ndarray:
     return corner + np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1).reshape(-1, 3)
 
 
+def best_substep_s(solver: MPMSolver, dt: float, steps: int, repeats: int, device: str) -> float:
+    """The fastest of `repeats` timings of `steps` substeps of `dt` seconds, in seconds per substep."""
+    best = float("inf")
+    for _ in range(repeats):
+        wp.synchronize_device(device)
+        start = time.perf_counter()
+        for _ in range(steps):
+            solver.substep(dt)
+        wp.synchronize_device(device)
+        best = min(best, (time.perf_counter() - start) / steps)
+    return best
+
+
 def time_substep(material, n_particles: int, threads: int | None, device: str, steps: int,
                  repeats: int) -> tuple[int, int, float]:
     """(particles, threads used, best seconds per substep) for one cube of `material`."""
@@ -61,14 +74,7 @@ def time_substep(material, n_particles: int, threads: int | None, device: str, s
     dt = 1e-4
     for _ in range(10):
         solver.substep(dt)
-    best = float("inf")
-    for _ in range(repeats):
-        wp.synchronize_device(device)
-        start = time.perf_counter()
-        for _ in range(steps):
-            solver.substep(dt)
-        wp.synchronize_device(device)
-        best = min(best, (time.perf_counter() - start) / steps)
+    best = best_substep_s(solver, dt, steps, repeats, device)
     used = solver.n_parts
     solver.close()
     return len(x), used, best
@@ -126,14 +132,7 @@ def scene_against_solver(device: str, repeats: int) -> list[list]:
         if material.preset == "rigid":
             solver.attach_rigid(RigidBodies(sim.rest_sim, sim.masses, sim.object_id, {0: material}, sim.ground,
                                             0.5 * sim.spacing, device))
-        bare = float("inf")
-        for _ in range(repeats):
-            wp.synchronize_device(device)
-            begin = time.perf_counter()
-            for _ in range(substeps):
-                solver.substep(h)
-            wp.synchronize_device(device)
-            bare = min(bare, (time.perf_counter() - begin) / substeps)
+        bare = best_substep_s(solver, h, substeps, repeats, device)
         solver.close()
         rows.append([label, len(sim.masses), "x".join(map(str, sim.grid.shape)), substeps, f"{1e3 * scene:.2f}",
                      f"{1e3 * bare:.2f}", f"{scene / bare:.2f}"])
