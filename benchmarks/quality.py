@@ -2,7 +2,8 @@
 (RESULTS.md is regenerated from them).
 
 One function per section; run all or one:
-    python -m benchmarks.quality [--section NAME] [--device cpu] [--results results/] [--no-figures]
+    python -m benchmarks.quality [--section NAME] [--device cpu] [--results results/]
+                                 [--new-results DIR] [--no-figures]
 
 reconstruct: for every example scene, the default pm-reconstruct settings:
   masked PSNR of the input-view render against the photograph (at the
@@ -14,8 +15,9 @@ reconstruct: for every example scene, the default pm-reconstruct settings:
 
 enhance: the flow backend on the results of `make demo` (see enhancement_section).
 
-unseen, shadows: reconstructions turned and moved, their unseen sides' detail and their shadows
-  (see unseen_section, shadow_section).
+unseen, shadows: the examples' reconstructions and those of photographs new to them (NEW_PHOTOGRAPHS,
+  pm-reconstruct of benchmarks/scenes/NAME into --new-results/NAME), turned and moved: their unseen
+  sides' detail and their shadows (see unseen_section, shadow_section).
 
 granular: the granular examples' heaps against their photographs' colours (see granular_section).
 """
@@ -29,6 +31,7 @@ import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import Iterator
 
 import cv2
 import numpy as np
@@ -109,6 +112,23 @@ def reconstruction_section(device: str) -> list[list]:
     return rows
 
 
+def _examples(results: Path) -> list[tuple[str, Path]]:
+    """(name, the workflow's results folder) of every example scene (scenes/NAME/scene.yaml)."""
+    return [(f.parent.name, results / f.parent.name) for f in sorted((ROOT / "scenes").glob("*/scene.yaml"))]
+
+
+def _each_result(folders: list[tuple[str, Path]], needs: str, columns: list[str],
+                 rows: list[list]) -> Iterator[tuple[str, Path]]:
+    """Each (name, folder) whose folder holds the file ``needs``; for each other one, a row of ``rows``
+    (of ``columns``) says which file is missing."""
+    for name, folder in folders:
+        if (folder / needs).exists():
+            yield name, folder
+        else:
+            rows.append([name, f"missing: {folder / needs} (run `make demo`, or pm-reconstruct into {folder})",
+                         *[""] * (len(columns) - 2)])
+
+
 def _inside(mask: np.ndarray) -> np.ndarray:
     """The object's pixels without the silhouette's own edge (3 px), whose contrast against the
     background would outweigh the texture."""
@@ -167,12 +187,8 @@ def enhancement_section(results: Path) -> list[list]:
     consecutive decoded frames of the pixels no frame's object ever covers.
     """
     rows = []
-    for scene_file in sorted((ROOT / "scenes").glob("*/scene.yaml")):
-        name, folder = scene_file.parent.name, results / scene_file.parent.name
-        if not (folder / "video.mp4").exists():
-            rows.append([name, "missing: run `make demo` first", *[""] * (len(ENHANCE_COLUMNS) - 2)])
-            continue
-        scene = load_scene(scene_file)
+    for name, folder in _each_result(_examples(results), "video.mp4", ENHANCE_COLUMNS, rows):
+        scene = load_scene(ROOT / "scenes" / name / "scene.yaml")
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
         coarse = read_artifact(folder / "coarse.h5", CoarseArtifact)
         enhanced = flow.enhance_frames(coarse, gaussians, scene.enhance.confidence_threshold,
@@ -274,9 +290,10 @@ def granular_section(results: Path) -> list[list]:
     return rows
 
 
-UNSEEN_SCENES = ["ball", "cat", "loaf"]
-"""Reconstructions (the workflow's results/<name>/gaussians.h5) turned and moved by the hidden-surface and
-shadow sections: the example ball and two photographs new to the examples (benchmarks/scenes: cat, loaf)."""
+NEW_PHOTOGRAPHS = ("cat", "motorcycle")
+"""Photographs new to the examples (benchmarks/scenes) whose reconstructions (NAME/gaussians.h5 under
+--new-results) the hidden-surface and shadow sections turn and move beside the examples': chelsea's head
+before a dark room, and a motorcycle casting its own shadow on a garage floor."""
 TURNS_DEG = (0, 45, 90, 135, 180)
 
 
@@ -304,24 +321,25 @@ def _high_frequency(rgb: np.ndarray, pixels: np.ndarray) -> float:
     return float(((grey - cv2.GaussianBlur(grey, (0, 0), 1.0)) ** 2)[pixels].mean())
 
 
-UNSEEN_COLUMNS = ["scene", "turn (deg)", "unseen share of the object", "HF unseen / seen, before",
-                  "HF unseen / seen, after"]
+UNSEEN_COLUMNS = ["scene", "turn (deg)", "unseen share of the object", "HF unseen / seen, read through the body",
+                  "HF unseen / seen, flow backend"]
 
 
-def unseen_section(results: Path) -> list[list]:
+def _reconstructions(args) -> list[tuple[str, Path]]:
+    """(name, folder) of the examples' results and of the new photographs' (NEW_PHOTOGRAPHS)."""
+    return _examples(args.results) + [(name, args.new_results / name) for name in NEW_PHOTOGRAPHS]
+
+
+def unseen_section(args) -> list[list]:
     """Each reconstruction turned about the vertical (TURNS_DEG) through pm-render: the high-frequency
     energy (_high_frequency) of the object's unseen pixels (seen fraction < 0.5, inside alpha > 0.5
-    eroded by 3 px) over that of the photograph inside its object (the seen side, as photographed);
-    before: the photograph read at the source points (the read through the body), after: the flow
-    backend (unseen.py)."""
+    eroded by 3 px) over that of the photograph inside its object (the seen side, as photographed):
+    of the photograph read at the source points (the read through the body), and of the flow backend
+    (unseen.py)."""
     from stages.render.render import render_video
 
     rows = []
-    for name in UNSEEN_SCENES:
-        folder = results / name
-        if not (folder / "gaussians.h5").exists():
-            rows.append([name, "missing: reconstruct it first", "", "", ""])
-            continue
+    for name, folder in _each_result(_reconstructions(args), "gaussians.h5", UNSEEN_COLUMNS, rows):
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
         coarse = render_video(gaussians, _moved(gaussians, TURNS_DEG), width=320, device="cpu")
         after = flow.enhance_frames(coarse, gaussians, 0.5)
@@ -334,12 +352,12 @@ def unseen_section(results: Path) -> list[list]:
                 continue
             seen = flow.seen_fraction(coarse.source_confidence[t], coarse.source_coherence[t])
             unseen = _inside(coarse.alpha[t] > 0.5) & (seen < 0.5)
+            share = unseen.sum() / max(_inside(coarse.alpha[t] > 0.5).sum(), 1)
             if unseen.sum() < 100:
-                rows.append([name, turn, f"{100 * unseen.mean():.0f} %", "", ""])
+                rows.append([name, turn, f"{100 * share:.0f} %", "", ""])
                 continue
             uv = flow.smooth_source(coarse.source_uv[t] * w / gaussians.width)
             before = (flow.photograph_at(fine_photo, uv) + 0.5).astype(np.uint8)
-            share = unseen.sum() / max(_inside(coarse.alpha[t] > 0.5).sum(), 1)
             rows.append([name, turn, f"{100 * share:.0f} %", f"{_high_frequency(before, unseen) / photographed:.2f}",
                          f"{_high_frequency(after[t], unseen) / photographed:.2f}"])
     return rows
@@ -349,28 +367,29 @@ SHADOW_COLUMNS = ["scene", "photograph's shadow, deepest", "light towards (camer
                   "cast shadow drawn, deepest", "left at the old place"]
 
 
-def shadow_section(results: Path) -> list[list]:
-    """Each reconstruction moved sideways by its own width (pm-render of its Gaussians alone, frame 1):
-    the photograph's shadow (1 - photograph / shadow-free background, beside the object), the light and
+def shadow_section(args) -> list[list]:
+    """Each reconstruction moved sideways by its own width (pm-render of its Gaussians alone, frame 1),
+    its background inpainted anew from the photograph (reconstruct/background.py as it is now): the
+    photograph's shadow (1 - photograph / shadow-free background, beside the object), the light and
     blur fitted to it (shadow.py), the darkening drawn under the moved object, and what is left of the
     photograph's shadow where the object stood (mean darkening of frame 1 over the photograph's, where
     that is over 15 % and the moved object is not)."""
     from stages.enhance.relight import Relighting
     from stages.enhance.shadow import Shadows
+    from stages.enhance.unseen import MirrorPlanes
+    from stages.reconstruct.background import inpaint_background
     from stages.render.render import render_video
 
     rows = []
-    for name in UNSEEN_SCENES:
-        folder = results / name
-        if not (folder / "gaussians.h5").exists():
-            rows.append([name, "missing: reconstruct it first", "", "", "", ""])
-            continue
+    for name, folder in _each_result(_reconstructions(args), "gaussians.h5", SHADOW_COLUMNS, rows):
         gaussians = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
+        gaussians = replace(gaussians, background=inpaint_background(gaussians.photo, gaussians.mask))
         R = gaussians.world_to_camera[:3, :3]
         width = np.ptp(gaussians.means @ R[0])  # along the camera's x, in the world
         coarse = render_video(gaussians, _moved(gaussians, (0, 0), R[0] * width), width=320, device="cpu")
         relighting = Relighting.fit(coarse, resize_to(gaussians.photo, coarse.width, coarse.height))
-        shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None)
+        shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None,
+                              MirrorPlanes.of(gaussians))
         darkening = shadows(1, coarse.width / gaussians.width)
         free = cv2.dilate((coarse.alpha[1] > 0.01).astype(np.uint8), np.ones((5, 5), np.uint8)) == 0
         old = free & (shadows.photographed > 0.15)
@@ -433,26 +452,28 @@ SECTIONS = {
                 pixels no frame's object ever covers.""",
                 ["Targets: frame-0 PSNR 35 dB, sharpness within 20 % of the photograph's, flicker at most "
                  "0.5/255."]),
-    "unseen": (lambda args: unseen_section(args.results), UNSEEN_COLUMNS, "Unseen surfaces",
+    "unseen": (unseen_section, UNSEEN_COLUMNS, "Unseen surfaces",
                """Reconstructions turned about the vertical through pm-render (their Gaussians alone, at 320 px):
                the high-frequency energy (luma minus its Gaussian blur of 1 px, squared) of the pixels whose
                surface the photograph did not see (seen fraction under one half, inside the object less its 3 px
-               silhouette), over that of the photograph inside its object. Before: the photograph read at the
-               source points, through the body (docs/decisions/0004-hidden-surfaces.md as it was); after: the
-               flow backend, which reads the mirrored front as albedo and continues it where the photograph saw
-               the surface edge-on (docs/decisions/0024-unseen-surfaces.md). The example ball, and scikit-image's
-               chelsea (the cat) and the loaf (benchmarks/scenes), reconstructed with their scenes' settings.""",
+               silhouette), over that of the photograph inside its object. Read through the body: the photograph
+               read at the source points (docs/decisions/0004-hidden-surfaces.md); flow backend: the mirrored
+               front read as albedo and continued where the photograph recorded the surface poorly
+               (docs/decisions/0024-unseen-surfaces.md). The examples, and two photographs new to them
+               (benchmarks/scenes: scikit-image's chelsea, the cat, and its motorcycle), reconstructed with their
+               scenes' settings.""",
                ["Target: at most 1.5 (issue 31). The test ball coloured by height and spun "
                 "(tests/render_enhance/test_enhance_unseen.py) is at least 30.8 dB PSNR-Y from its photograph "
-                "past 30 degrees (before: 21.7 dB at 90 degrees)."]),
-    "shadows": (lambda args: shadow_section(args.results), SHADOW_COLUMNS, "Shadows",
-                """Reconstructions moved sideways by their own width (pm-render of their Gaussians alone, at 320 px):
-                the photograph's shadow (the photograph over the background with the shadow divided out,
-                reconstruct/background.py), the light and blur fitted to it (enhance/shadow.py), the darkening
-                drawn under the moved object, and how much of the photograph's shadow is left where the object
-                stood (mean darkening of the moved frame over the photograph's, where that is over 15 % and the
-                moved object is not). Before, the background kept the photograph's shadow (100 % left) and
-                nothing was drawn.""",
+                "past 30 degrees."]),
+    "shadows": (shadow_section, SHADOW_COLUMNS, "Shadows",
+                """Reconstructions moved sideways by their own width (pm-render of their Gaussians alone, at 320 px),
+                their backgrounds inpainted anew from the photograph: the photograph's shadow (the photograph over
+                the background with the shadow divided out, reconstruct/background.py), the light and blur fitted
+                to it (enhance/shadow.py), the darkening drawn under the moved object, and how much of the
+                photograph's shadow is left where the object stood (mean darkening of the moved frame over the
+                photograph's, where that is over 15 % and the moved object is not). The examples, and two
+                photographs new to them (benchmarks/scenes): the cat before a dark room, which casts no shadow,
+                and the motorcycle, which casts its own on the garage floor.""",
                 ["On a ray-traced floor (tests/render_enhance/test_enhance_shadow.py): 99 % of the old shadow "
                  "removed, 85 % of the ray-traced darkening drawn under the moved ball."]),
 }
@@ -465,6 +486,9 @@ def main() -> None:
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
     parser.add_argument("--results", type=Path, default=ROOT / "results",
                         help="the workflow's results folder, for the enhance section (default: results/)")
+    parser.add_argument("--new-results", type=Path, default=ROOT / "results",
+                        help="a folder holding NAME/gaussians.h5 of each of NEW_PHOTOGRAPHS (pm-reconstruct of "
+                             "benchmarks/scenes/NAME), for the unseen and shadows sections (default: results/)")
     add_arguments(parser)
     args = parser.parse_args()
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(message)s", datefmt="%H:%M:%S")
@@ -478,7 +502,8 @@ def main() -> None:
         print(f"## {name}\n\n" + "\n".join(table) + "\n", flush=True)
         if not args.no_figures:
             command = shlex.join(["python", "-m", "benchmarks.quality", "--section", name,
-                                  *(["--device", args.device] if args.device != "cpu" else [])])
+                                  *(["--device", args.device] if args.device != "cpu" else []),
+                                  *(["--new-results", str(args.new_results)] if name in ("unseen", "shadows") else [])])
             write_figures(name, title, description, command, columns, rows, notes=notes, device=args.device)
 
 

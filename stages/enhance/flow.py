@@ -28,7 +28,7 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
 from .shadow import Shadows
-from .unseen import Continuation
+from .unseen import Continuation, MirrorPlanes
 
 log = logging.getLogger("physmotion.enhance.flow")
 
@@ -122,11 +122,12 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     fine_photo = band_limited_upsample(photo)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
+    planes = MirrorPlanes.of(gaussians)
     continuation = Continuation.fit(coarse, gaussians, photo, coverage, lambda uv: photograph_at(fine_photo, uv),
-                                    relight)
+                                    relight, planes)
     if ground:
         relighting = continuation.relighting
-        shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None)
+        shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None, planes)
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
         rendered_uv = coarse.source_uv[t] * scale

@@ -118,14 +118,15 @@ class Shadows:
         self.pixels = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5
 
     @classmethod
-    def fit(cls, coarse: CoarseArtifact, gaussians: GaussiansArtifact, light: Optional[np.ndarray]) -> "Shadows":
+    def fit(cls, coarse: CoarseArtifact, gaussians: GaussiansArtifact, light: Optional[np.ndarray],
+            planes: MirrorPlanes) -> "Shadows":
         """Args:
             light: (3,) the fitted light (relight.Shading.light, camera frame), or None: from overhead.
+            planes: the objects' planes of symmetry at rest (MirrorPlanes.of(gaussians)).
         """
         h, w = coarse.alpha.shape[1:]
         ground = Ground.of(gaussians)
         direction = towards_light(light, ground.down)
-        planes = MirrorPlanes.of(gaussians)
         rays = pixel_rays(coarse.K, h, w)
         photo = resize_to(gaussians.photo, w, h).astype(np.float32).mean(-1)
         background = resize_to(gaussians.background, w, h).astype(np.float32).mean(-1)

@@ -239,11 +239,11 @@ class Continuation:
 
     @classmethod
     def fit(cls, coarse: CoarseArtifact, gaussians: GaussiansArtifact, photo: np.ndarray, coverage: np.ndarray,
-            photograph_at: Callable[[np.ndarray], np.ndarray], relight: bool) -> "Continuation":
+            photograph_at: Callable[[np.ndarray], np.ndarray], relight: bool, planes: MirrorPlanes) -> "Continuation":
         """Args:
             photo: (h, w, 3) the photograph at output resolution; coverage: (h, w) flow.object_coverage;
             photograph_at: (h, w, 2) image points -> (h, w, 3) sRGB, the photograph read there with its
-                detail (flow.photograph_at); relight: fit a light.
+                detail (flow.photograph_at); relight: fit a light; planes: MirrorPlanes.of(gaussians).
         """
         h, w = coarse.alpha.shape[1:]
         relighting = Relighting.fit(coarse, photo) if relight else None
@@ -254,7 +254,7 @@ class Continuation:
         albedo = Albedo.fit(photo, coverage, rest_normals, rays, relighting.shading if relighting else None)
         front_distance = np.where(on, coarse.depth[0] / np.maximum(coarse.alpha[0], 1e-6), np.nan)
         labels = cv2.resize(gaussians.mask, (w, h), interpolation=cv2.INTER_NEAREST)
-        return cls(coarse, albedo, relighting, sigma, MirrorPlanes.of(gaussians), labels, front_distance, rays,
+        return cls(coarse, albedo, relighting, sigma, planes, labels, front_distance, rays,
                    photograph_at)
 
     def shading_now(self, t: int) -> tuple[np.ndarray, np.ndarray]:
