@@ -194,8 +194,7 @@ def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: n
         photo: (H, W, 3) u8 RGB; labels: (H, W) 0 background, k + 1 object k (gaussians.h5's mask);
         K: (3, 3) the photograph's intrinsics; world_to_camera: (4, 4).
     """
-    in_camera = rest_positions @ world_to_camera[:3, :3].T + world_to_camera[:3, 3]
-    uv = project_points(in_camera, K)
+    uv = project_points(to_camera(rest_positions, world_to_camera), K)
     H, W = labels.shape
     col = np.clip(np.floor(uv[:, 0]), 0, W - 1).astype(np.int64)
     row = np.clip(np.floor(uv[:, 1]), 0, H - 1).astype(np.int64)

@@ -53,9 +53,13 @@ def full_camera(gaussians: GaussiansArtifact) -> splat.Camera:
                         gaussians.width, gaussians.height)
 
 
-def to_camera(points: torch.Tensor, world_to_camera) -> torch.Tensor:
-    """(N, 3) world points -> (N, 3) camera-frame points; world_to_camera (4, 4), torch or numpy."""
-    w2c = torch.as_tensor(world_to_camera, dtype=points.dtype, device=points.device)
+def to_camera(points, world_to_camera):
+    """(..., 3) world points (m) -> (..., 3) camera-frame points, of the type of ``points`` (a torch tensor
+    or a numpy array); world_to_camera (4, 4), torch or numpy."""
+    if isinstance(points, torch.Tensor):
+        w2c = torch.as_tensor(world_to_camera, dtype=points.dtype, device=points.device)
+    else:
+        w2c = np.asarray(world_to_camera, dtype=points.dtype)
     return points @ w2c[:3, :3].T + w2c[:3, 3]
 
 
