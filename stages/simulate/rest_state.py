@@ -39,6 +39,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from .conditions import inertia_about_centre
 from .constitutive import MIN_STRETCH, lame_parameters
+from .state import Particles
 
 log = logging.getLogger("physmotion.simulate")
 
@@ -245,14 +246,21 @@ def warn_footless(k: int, material, periods: float, seconds: float) -> None:
                 periods, seconds, k)
 
 
+@wp.struct
+class RelaxationSums:
+    """What the settle sums over the particles each substep."""
+
+    displacement: wp.array(dtype=wp.vec3)  # (P,) summed v dt, m
+    kinetic: wp.array(dtype=wp.float64)  # (1,) this substep's sum of m |v|^2 / 2, J
+
+
 @wp.kernel
-def relaxation_sums(v: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), dt: float,
-                    displacement: wp.array(dtype=wp.vec3), kinetic: wp.array(dtype=wp.float64)):
+def relaxation_sums(particles: Particles, dt: float, sums: RelaxationSums):
     """displacement_p += dt v_p, and the kinetic energy sum m_p |v_p|^2 / 2 into kinetic[0] (J)."""
     p = wp.tid()
-    u = v[p]
-    displacement[p] = displacement[p] + dt * u
-    wp.atomic_add(kinetic, 0, wp.float64(0.5 * mass[p] * wp.dot(u, u)))
+    u = particles.v[p]
+    sums.displacement[p] = sums.displacement[p] + dt * u
+    wp.atomic_add(sums.kinetic, 0, wp.float64(0.5 * particles.mass[p] * wp.dot(u, u)))
 
 
 class Relaxation:
@@ -284,8 +292,9 @@ class Relaxation:
             centre, inertia = inertia_about_centre(positions[members], self.masses[members])
             self.offsets.append(positions[members] - centre)
             self.inverse_inertia.append(np.linalg.pinv(inertia))
-        self._displacement = wp.zeros(len(self.masses), dtype=wp.vec3, device=solver.device)
-        self._kinetic = wp.zeros(1, dtype=wp.float64, device=solver.device)
+        self._sums = RelaxationSums()
+        self._sums.displacement = wp.zeros(len(self.masses), dtype=wp.vec3, device=solver.device)
+        self._sums.kinetic = wp.zeros(1, dtype=wp.float64, device=solver.device)
         self.steps = 0
         self.first = self.previous = 0.0
         self.rising = True
@@ -294,7 +303,7 @@ class Relaxation:
 
     def displacement(self) -> np.ndarray:
         """(P,3) m: the summed v dt of every particle."""
-        return self._displacement.numpy().astype(np.float64)
+        return self._sums.displacement.numpy().astype(np.float64)
 
     def _without_drift_and_spin(self, v: np.ndarray) -> np.ndarray:
         """v (P,3) less each body's horizontal mean velocity and its rigid rotation about its centre of mass."""
@@ -311,10 +320,10 @@ class Relaxation:
         if self.steps % RIGID_MOTION_EVERY == 0:
             v = self._without_drift_and_spin(solver.v.numpy().astype(np.float64))
             solver.v.assign(v.astype(np.float32))
-        self._kinetic.zero_()
+        self._sums.kinetic.zero_()
         wp.launch(relaxation_sums, dim=len(self.masses), device=solver.device,
-                  inputs=[solver.v, solver.mass, dt, self._displacement, self._kinetic])
-        energy = float(self._kinetic.numpy()[0])
+                  inputs=[solver.particles, dt, self._sums])
+        energy = float(self._sums.kinetic.numpy()[0])
         if energy < self.previous and self.rising:  # just past a peak
             self.peaks += 1
             self.first = self.first or self.previous
