@@ -1,4 +1,4 @@
-"""Tile binning: which Gaussians touch which 16x16 tile, in depth order per tile.
+"""Tile binning: which Gaussians touch which 8x8 tile, in depth order per tile.
 
 Not differentiable: it only decides which pixel meets which Gaussian and in
 what order. The outcome is a list of (tile, Gaussian) intersections sorted by
@@ -13,7 +13,7 @@ import warp as wp
 
 from .launch import launch
 
-TILE_SIZE = wp.constant(16)
+TILE_SIZE = wp.constant(8)
 """Tile side in pixels."""
 ALPHA_MIN = wp.constant(1.0 / 255.0)
 """A Gaussian reaches exactly the pixels where its alpha is at least this."""

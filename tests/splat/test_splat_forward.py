@@ -19,7 +19,7 @@ from splat import composite
 @pytest.mark.parametrize("num_gaussians, width, height, seed", [
     (1, 17, 23, 0), (40, 45, 33, 1), (600, 64, 48, 2), (5000, 50, 37, 3)])
 def test_random_scenes_match_oracle(device, num_gaussians, width, height, seed):
-    # Image sizes are not multiples of the 16 px tile; some means lie outside the view.
+    # Image sizes are not multiples of the 8 px tile; some means lie outside the view.
     scene = random_scene(seed, num_gaussians, width, height, spread=1.2, background=True)
     assert_matches_oracle(scene, device)
 
@@ -82,7 +82,7 @@ def test_equal_depth_ties_break_by_index():
 
 
 def test_gaussians_on_tile_borders():
-    # 2D means exactly on tile edges and corners (multiples of 16 px) and half a pixel beside them.
+    # 2D means exactly on tile edges and corners (multiples of the 8 px tile) and half a pixel beside them.
     scene = random_scene(11, 24, 50, 35, scale=(0.005, 0.05), focal=40.0)
     uv = torch.tensor([(u, v) for u in (0.0, 15.5, 16.0, 16.5, 32.0, 48.0) for v in (0.0, 16.0, 31.5, 32.0)],
                       dtype=torch.float64)
