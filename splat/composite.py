@@ -27,7 +27,16 @@ ALPHA_MAX = wp.constant(0.99)
 TRANSMITTANCE_MIN = wp.constant(1e-4)
 """Compositing stops before the transmittance would fall below this."""
 
-CPU_THREADS = max(1, min(os.cpu_count() or 1, 16))
+
+def _thread_budget() -> int:
+    """OMP_NUM_THREADS where the caller sets it (snakemake sets it to each job's threads, so two one-thread
+    jobs on two cores do not take each other's core), else the CPUs; at most 16."""
+    given = os.environ.get("OMP_NUM_THREADS", "").strip()
+    threads = int(given) if given.isdigit() and int(given) > 0 else os.cpu_count() or 1
+    return min(threads, 16)
+
+
+CPU_THREADS = _thread_budget()
 """Python threads that launch CPU kernels concurrently, each on its own set of tiles."""
 
 

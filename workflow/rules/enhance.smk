@@ -69,8 +69,8 @@ rule enhance:
         RESULTS / "{scene}" / "benchmarks" / "enhance.tsv"
     container:
         image("enhance")
-    threads: 2
-    # The flow backend is OpenCV on the CPU; only diffusion wants a GPU, and for longer.
+    # The flow backend is OpenCV on the CPU, one thread as render; only diffusion wants two, a GPU and longer.
+    threads: lambda w: 2 if uses_diffusion(w.scene) else 1
     resources:
         mem_mb=8000,
         runtime=lambda w: 240 if uses_diffusion(w.scene) else 30,

@@ -13,7 +13,9 @@ rule reconstruct:
         RESULTS / "{scene}" / "benchmarks" / "reconstruct.tsv"
     container:
         image("reconstruct")
-    threads: 2
+    # One thread: most of its time is serial Python and torch between splat's kernels, so two scenes side by side
+    # on two cores finish sooner than one after the other on both (snakemake sets OMP_NUM_THREADS, which splat reads).
+    threads: 1
     resources:
         mem_mb=4000,
         runtime=60,

@@ -15,7 +15,8 @@ rule render:
         RESULTS / "{scene}" / "benchmarks" / "render.tsv"
     container:
         image("render")
-    threads: 2
+    # One thread, as reconstruct: two scenes render side by side.
+    threads: 1
     resources:
         mem_mb=4000,
         runtime=30,
