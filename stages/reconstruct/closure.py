@@ -323,7 +323,7 @@ def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np
             return -math.inf, 0.0
         centre = np.tensordot(weights, rays[:, None, :] * t[..., None], axes=([0, 1], [0, 1])) / weights.sum()
         ends = np.concatenate([rays * start[:, None], rays * end[:, None]])
-        base = ends[-(ends @ down) <= lowest + cut + layer]
+        base = ends[-(ends @ down) <= lowest + cut + (layer if cut == 0 else 1e-6 * tall)]
         inside = support_margin(np.stack([base @ across, base @ along], axis=1),
                                 np.array([centre @ across, centre @ along]))
         return inside, -(centre @ down) - (lowest + cut)
