@@ -14,8 +14,12 @@ from scipy.spatial.transform import Rotation
 from schemas import materials as M
 from schemas.program import InputError
 from schemas.scene import PhysicsConfig
+from stages.reconstruct.closure import object_depths
+from stages.reconstruct.geometry import intrinsics_from_fov
+from stages.reconstruct.lift import lift_object
 from stages.simulate import rest_state
 from stages.simulate.simulation import Simulation
+from testing.photographs import Capsule, UprightCylinder, photograph, standing_axes
 from testing.particles import box_surface, fibonacci_sphere
 
 G = 9.81
@@ -258,6 +262,40 @@ def test_a_body_no_support_holds_is_named_before_the_run(caplog):
             Simulation(PhysicsConfig(grid=20, fps=10, duration_s=0.1), [M.Jelly(youngs_modulus=5e4)], points,
                        np.zeros(len(points), int))
         assert any("does not stand as reconstructed" in r.getMessage() for r in caplog.records) == warned, tilt
+
+
+def photographed_body(mask: np.ndarray, size_m: float, pitch: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The Gaussians' means (N,3) m lifted from the closure's body of silhouette `mask` (H,W) bool under a
+    40-degree camera pitched `pitch` degrees, that camera's K (3,3), and the body's volume (m^3)."""
+    height, width = mask.shape
+    K = intrinsics_from_fov(40, width, height)
+    depth = object_depths(mask.astype(np.uint8), K, [size_m], pitch)[0]
+    gaussians, _ = lift_object(depth, K, np.zeros((height, width, 3), np.uint8), 0)
+    return gaussians.means, K, depth.volume(K)
+
+
+@pytest.mark.parametrize("name", ["tall upright cylinder", "capsule leaning 45 degrees"])
+def test_a_photographed_body_that_stands_is_not_named_and_one_that_tips_is(name, caplog):
+    """Reconstructed from a ray-cast photograph under a camera pitched 10 degrees, as rigid on friction ground
+    for 0.6 s: a tall narrow upright cylinder (5 x 16 cm) stands on its flat base, is not named and turns
+    under 1 degree; a capsule leaning 45 degrees, whose base would take more than closure.MAX_CUT_VOLUME,
+    is named before the run as one no support holds, and falls past 10 degrees."""
+    K = intrinsics_from_fov(40, 256, 192)
+    shape = (UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(10.0), 0.025, 0.16)
+             if name == "tall upright cylinder" else Capsule.tilted(tilt_deg=45.0))
+    mask = photograph(shape, K, np.eye(4), 256, 192).mask
+    means, K, volume = photographed_body(mask, shape.size_m, 10.0)
+    with caplog.at_level("WARNING", logger="physmotion.simulate"):
+        sim = Simulation(PhysicsConfig(grid=24, fps=10, duration_s=0.6, ground={"type": "friction", "friction": 0.6}),
+                         [M.Rigid()], means, np.zeros(len(means), int), pitch_deg=10.0, silhouette=(mask, K),
+                         prior_volumes=np.array([volume]))
+    named = any("does not stand as reconstructed" in r.getMessage() for r in caplog.records)
+    tr = sim.run()
+    turn = max(turn_deg(tr.positions[0], tr.positions[f], tr.masses) for f in range(len(tr.time_s)))
+    if name == "tall upright cylinder":
+        assert not named and turn < 1.0
+    else:
+        assert named and turn > 10.0
 
 
 def test_a_ball_tossed_straight_up_bounces_in_place_on_friction_ground(device):
