@@ -4,12 +4,21 @@ A 12 cm ball is ray-cast (testing/photographs.py) under a level and a pitched ca
 by pm-reconstruct from a 192 x 144 photograph, and tossed straight up (against gravity) at 1.2 m/s. Over 1 s
 its centre of mass may drift along the ground by at most 2 % of its size and it may turn at most 3 degrees;
 its total energy (trajectories' kinetic + potential diagnostics) never rises above its value just after the
-toss by more than 2 % of the toss's kinetic energy. Rigid on friction and slip ground, metal on friction
-ground, plasticine on both (metal on slip ground passes as well, measured 1.4 and 1.1 degrees level and
-pitched, but its stiff wave costs 5700 substeps a run). Jelly (E = 5e4 Pa) bounces on and gathers spin
-from bounce to bounce: measured 4.2 and 24 degrees on slip ground, 1.8 degrees and 1.5 % level and 4.0
-degrees and 5.5 % pitched on friction ground, past the bounds; benchmarks/toss.py measures every preset
-on the examples.
+toss by more than 2 % of the toss's kinetic energy. Rigid, metal and plasticine pass on friction and slip
+ground (metal on slip ground as well, measured 1.4 and 1.1 degrees level and pitched, but its stiff wave
+costs 5700 substeps a run, so only friction ground runs here).
+
+Jelly (E = 5e4 Pa) fails, and is held here as a strict expected failure, so that the day its body lands
+where it went up the mark has to go. It bounces four times in the second and each landing turns it by the
+lever between its contact and its centre of mass: the ground node layer's mass centroid lies 0.89 mm
+(level) and 0.57 mm (pitched) from the centre of mass along the ground, because the reconstructed ball's
+bottom is not symmetric about the vertical through its centre of mass (its front, sampled a pixel at a
+time, reaches lower than its sparse back), and the ball turns 46 and 39 degrees on slip ground, 21 and 14
+on friction ground, where the spin rolls it 25 and 17 mm away. The solver adds no lever of its own
+(tests/simulate/test_simulate_physics.py: mirror images spin mirrored, a mirror-symmetric ball not at all);
+the turn grows with the lever, and at most 3 degrees in four bounces asks for a lever of a few hundredths
+of a millimetre (0.02-0.06 mm by the ratios of turn to lever measured on a 12 cm Fibonacci sphere of 1918
+Gaussians, 0.06 mm and 7.9 degrees, and on the ball), a symmetry the reconstruction has to give.
 """
 from __future__ import annotations
 
@@ -38,10 +47,17 @@ def ball(request, tmp_path_factory):
     return read_artifact(folder / "gaussians.h5", GaussiansArtifact), request.param
 
 
-@pytest.mark.parametrize("material, ground", [(M.Rigid(), "friction"), (M.Rigid(), "slip"), (M.Metal(), "friction"),
-                                              (M.Plasticine(), "friction"), (M.Plasticine(), "slip")],
-                         ids=["rigid-friction", "rigid-slip", "metal-friction", "plasticine-friction",
-                              "plasticine-slip"])
+JELLY_LANDS_OFF_CENTRE = pytest.mark.xfail(
+    strict=True, raises=AssertionError, reason="the reconstructed ball's bottom lies off its centre of mass (issue 30, point 1): measured "
+                        "46 and 39 degrees on slip ground, 21 and 14 degrees and 25 and 17 mm on friction ground")
+
+
+@pytest.mark.parametrize("material, ground", [
+    (M.Rigid(), "friction"), (M.Rigid(), "slip"), (M.Metal(), "friction"), (M.Plasticine(), "friction"),
+    (M.Plasticine(), "slip"), pytest.param(M.Jelly(), "friction", marks=JELLY_LANDS_OFF_CENTRE),
+    pytest.param(M.Jelly(), "slip", marks=JELLY_LANDS_OFF_CENTRE)],
+    ids=["rigid-friction", "rigid-slip", "metal-friction", "plasticine-friction", "plasticine-slip", "jelly-friction",
+         "jelly-slip"])
 def test_a_ball_tossed_straight_up_comes_down_where_it_went_up(ball, material, ground):
     gaussians, pitch = ball
     physics = PhysicsConfig(duration_s=1.0, fps=24, grid=24, ground={"type": ground, "friction": 0.4},
