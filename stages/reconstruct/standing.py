@@ -277,8 +277,10 @@ def revolution(view: GravityView) -> Optional[Revolution]:
 
     Seen from above (or below), circles beyond an end fit inside the images of the others (seen_ends): the
     widest that fit there are no evidence. Where the last circle seen traces the outline (a rim) and the
-    body does not narrow towards it, the end is flat there (flat_end); else (a ball) it is a dome
-    continuing the slices before it (dome_end)."""
+    body does not narrow towards it, the end is flat there (flat_end); else it is a dome continuing the
+    slices before it (dome_end). Where both ends' domes agree the body is a ball; otherwise its lower end
+    stands on the ground or on what hides it (a saucer's rim, the picture's edge), and is cut flat at the
+    last slab seen."""
     focal = view.K[0, 0]
     _, cols = np.nonzero(view.mask)
     half_width = 0.5 * np.ptp(cols) / focal
@@ -329,6 +331,8 @@ def revolution(view: GravityView) -> Optional[Revolution]:
         (_, top_centre, top_rho), (_, bottom_centre, bottom_rho) = top_dome, bottom_dome
         if abs(top_centre - bottom_centre) <= BALL_AGREE * top_rho and abs(top_rho - bottom_rho) <= BALL_AGREE * top_rho:
             ball = top_rho + bottom_rho
+    if ball is None and bottom_dome is not None:  # it stands on what hides its lower end: a cut, not a dome
+        bottom_y, bottom_dome = float(edges[bottom + 1]), None
     edges = np.linspace(top_y, bottom_y, SLICES + 1)
     heights = 0.5 * (edges[:-1] + edges[1:])
     radii = widest_radii(view, axis_x, heights)

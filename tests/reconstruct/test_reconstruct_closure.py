@@ -6,6 +6,8 @@ body's lowest points).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import pytest
 from scipy.spatial import ConvexHull
@@ -139,3 +141,52 @@ def test_a_photographed_standing_body_is_reconstructed_whole(name, width):
     np.testing.assert_allclose(principal_moments(points, 1000 * volumes), shape.principal_moments(1000), rtol=0.10)
     centre = volumes @ points / volumes.sum()
     assert np.linalg.norm(centre - shape.centre) < 0.02 * shape.size_m
+
+
+@dataclass(frozen=True)
+class OnSaucer:
+    """A cup (an upright cylinder) standing in a saucer (a wide flat one) whose rim hides its base."""
+
+    cup: UprightCylinder
+    saucer: UprightCylinder
+
+    def signed_distance(self, points: np.ndarray) -> np.ndarray:
+        return np.minimum(self.cup.signed_distance(points), self.saucer.signed_distance(points))
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        return self.cup.color(points)
+
+
+@pytest.mark.parametrize("hidden_by", ["saucer", "frame"])
+def test_a_standing_body_whose_base_is_hidden_stands_on_a_flat_cut(hidden_by):
+    """An upright cylinder (r = 45 mm, 80 mm tall) under a camera pitched 30 degrees, its base hidden by a
+    saucer's rim (a disc 12 mm thick, twice as wide, about it) or below the picture's lower edge: the
+    body of revolution ends flat where its silhouette ends, not in a dome, so the layer of 2 mm cubes at its
+    lowest point (independent of the closure) holds its centre of mass more than 0.6 of its radius inside
+    (ended in a dome, the saucer's cup: 0.17 of it)."""
+    width, height, pitch, radius = 256, 192, 30.0, 0.045
+    K = intrinsics_from_fov(40, width, height)
+    axes = standing_axes(pitch)
+    centre = np.array([0.0, 0.03 if hidden_by == "saucer" else 0.075, 0.35])
+    cup = UprightCylinder(centre, axes, radius, 0.08)
+    if hidden_by == "saucer":
+        saucer = UprightCylinder(centre - 0.04 * axes[1], axes, 2 * radius, 0.012)
+        shot = photograph(OnSaucer(cup, saucer), K, np.eye(4), width, height)
+        rays = pixel_rays(K, height, width)
+        points = rays * np.nan_to_num(shot.distance)[..., None]
+        mask = shot.mask & (np.abs(cup.signed_distance(points)) < 1e-4)
+    else:
+        mask = photograph(cup, K, np.eye(4), width, height).mask
+        assert mask[-1].any()  # cut by the frame
+    depth = object_depths(mask.astype(np.uint8), K, [cup.size_m], pitch)[0]
+    down = down_direction(pitch)
+    across = np.array([1.0, 0.0, 0.0])
+    along = np.cross(down, across)
+    solid = voxels(depth, K, 0.002)
+    heights = -(solid @ down)
+    foot = solid[heights <= heights.min() + 0.002]
+    centre_of_mass = solid.mean(axis=0)
+    hull = ConvexHull(np.stack([foot @ across, foot @ along], axis=1))
+    inside = -np.max(hull.equations[:, :2] @ np.array([centre_of_mass @ across, centre_of_mass @ along])
+                     + hull.equations[:, 2])
+    assert inside > 0.6 * radius
