@@ -1,6 +1,6 @@
 """Rest drift: a photographed object with no conditions must stay where it stands.
 
-    python -m benchmarks.rest results/ball results/coffee ... [--presets jelly rigid ...] [--no-figures]
+    python -m benchmarks.rest results/ball results/coffee ... [--presets scene jelly rigid ...] [--no-figures]
 
 Each folder holds a scene's gaussians.h5 (from pm-reconstruct) and names its
 scene by results/<name> -> scenes/<name>/scene.yaml unless --scenes-dir says
@@ -97,12 +97,11 @@ def main() -> None:
             defaults (`scene's`: the scene's own material): the largest turn of the body (best rigid fit of all
             particles), the largest travel of its centre of mass along the ground (mm and % of size_m), the
             largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball,
-            coffee and logo are the example scenes; rocket, motorcycle and loaf are the photographs of
-            benchmarks/scenes (made by `python benchmarks/scenes/make_photos.py`, reconstructed by
-            `pm-reconstruct --scene benchmarks/scenes/NAME/scene.yaml --out results/NAME/gaussians.h5` and
-            measured with `--scenes-dir benchmarks/scenes`); shuttle is the model shuttle stack at the right of
-            scikit-image's astronaut photograph as a new user writes it (box [350, 0, 476, 292], 0.45 m, a hint
-            image).""",
+            coffee and clay are the example scenes (scenes/NAME); shuttle (the model shuttle at the right of
+            scikit-image's astronaut, box [352, 0, 470, 290], 0.3 m) and cat (chelsea's head, box [20, 0, 400,
+            300], 0.15 m) are photographs new to the project, as a new user writes them. Every folder is
+            reconstructed by `pm-reconstruct --scene DIR/NAME/scene.yaml --out results/NAME/gaussians.h5` at
+            the commit named and measured with `--scenes-dir DIR`.""",
             invocation(__file__), columns, rows, merge_on=2)
 
 
