@@ -6,6 +6,8 @@
                tearing (benchmarks/tearing.py).
 - cat/:        `chelsea`, the cat's head as a 15 cm jelly, tossed up (benchmarks/toss.py).
 - coin/:       `coins`, the large coin at the right as a 3 cm metal disc seen from 80 degrees above.
+- wheel/:      `colorwheel` on a light grey page, a 25 cm disc of coloured sand that collapses to a heap
+               (benchmarks/quality.py, granular).
 
 Usage: python benchmarks/scenes/make_photos.py
 """
@@ -43,3 +45,6 @@ if __name__ == "__main__":
                       ("cat", skimage.data.chelsea()), ("coin", cv2.cvtColor(skimage.data.coins(), cv2.COLOR_GRAY2RGB))):
         write_image(HERE / name / "photo.png", cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     write_image(HERE / "loaf" / "photo.png", loaf())
+    page = np.full((420, 620, 3), 235, np.uint8)
+    page[25:395, 125:496] = skimage.data.colorwheel()
+    write_image(HERE / "wheel" / "photo.png", cv2.cvtColor(page, cv2.COLOR_RGB2BGR))

@@ -76,6 +76,10 @@ spread about twofold within a sieve fraction, and grains all of one size on a la
 GRAIN_ELONGATION = 1.5
 """A granular grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
 2 (a heap of round discs reads as bubbles, not sand)."""
+CAP_RADIUS = 0.6
+"""Radius of a granular grain's lit cap over the grain's (lit_caps): the cap, centred 1 - CAP_RADIUS grain radii
+above the grain's centre, touches the grain's top and stands for its upper part, which faces the sky; the
+rest of the grain, which faces the heap below, is its body."""
 EDGE_PX = 2
 """Pixels inside its silhouette from which the photograph gives a granular particle its colour."""
 FLOW_NEIGHBOURS = 8
@@ -224,6 +228,52 @@ def grain_colours(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
     shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(material_id)), -2, 2)
     shade = np.minimum(shade, 1 / np.maximum(colours.max(1), 1e-6))
     return np.where(granular[:, None], colours * shade[:, None], colours)
+
+
+def grain_relief(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
+    """(P,) how much brighter the top of a granular grain is than its mean, per grain radius of height:
+    k = (1 - a) / (1 + a), a the luma (Rec. 601) of its colour ``colours`` (P, 3) in [0, 1] taken as the
+    albedo of the heap around it; 0 for the other materials.
+
+    A Lambertian grain of normal n under a sky of radiance L above and a heap of the grain's albedo a
+    below (lit by the same sky) receives pi L ((1 + n.u) / 2 + a (1 - n.u) / 2), u up. Seen from the
+    side, n.u is the height y over the grain's image in radii (mean 0), so its shading over its mean is
+    1 + k y: a dark grain's top and underside differ most; a white grain (snow) is lit alike all over
+    (a relief under 1/255, which moves no channel by a grey level, counts as 0: no cap)."""
+    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
+    albedo = np.clip(colours @ np.array([0.299, 0.587, 0.114]), 0.0, 1.0)
+    relief = (1 - albedo) / (1 + albedo)
+    return np.where(granular & (relief >= 1 / 255), relief, 0.0)  # less moves no channel by a grey level
+
+
+def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
+             relief: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """Grains shaded as lit from above: (P, 3) the colours of the grains' bodies, and of the C grains whose
+    relief (P,) is above 0 the caps' (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities and
+    (C, 3) colours, drawn over them. A particle of relief 0 keeps its colour and has no cap.
+
+    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as
+    drawn this frame), the cap is the grain shrunk to CAP_RADIUS (rho) of its size, raised along the
+    picture's up by (1 - rho) of the grain's reach that way (its radius at alpha 1/2: a hard grain's
+    edge) and brought a hundredth of its reach nearer the camera, so that it sorts in front of its own
+    grain. Shading 1 + k y (grain_relief, k the relief) averaged over the cap, a disc of radius rho centred
+    at height 1 - rho in the grain's disc, is 1 + k (1 - rho); over the rest of the disc it is
+    1 - k rho^2 / (1 + rho): over the whole grain 1, so a grain keeps its colour on average. The cap's
+    factor stops where a channel would pass 1, so its hue stays (as grain_colours)."""
+    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
+    up = -to_camera_R[1, :3]  # the picture's up, world frame
+    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
+    lit = torch.nonzero(relief > 0)[:, 0]
+    k, grain = relief[lit].to(colours.dtype), covariances[lit]
+    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # a hard grain's alpha-1/2 radius in standard deviations
+    reach = lambda d: edge * torch.einsum("pi,pij,pj->p", d, grain, d).clamp_min(0).sqrt()  # noqa: E731
+    view = means[lit] - eye
+    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    cap_means = (means[lit] + ((1 - CAP_RADIUS) * reach(up.expand_as(view)))[:, None] * up
+                 - (0.01 * reach(view))[:, None] * view)
+    body = colours * (1 - relief.to(colours.dtype) * CAP_RADIUS ** 2 / (1 + CAP_RADIUS))[:, None]
+    brighter = torch.minimum(1 + k * (1 - CAP_RADIUS), 1 / colours[lit].amax(1).clamp_min(1e-6))
+    return body, cap_means, CAP_RADIUS ** 2 * grain, opacities[lit], colours[lit] * brighter[:, None]
 
 
 class Mixing:

@@ -30,8 +30,8 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_offsets, grain_shapes,
-                       hidden_at_rest, lattice_spacing, rest_ray_colours, surface_under)
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_offsets, grain_relief,
+                       grain_shapes, hidden_at_rest, lattice_spacing, lit_caps, rest_ray_colours, surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -62,7 +62,9 @@ class Particles(NamedTuple):
     colors (P, 3) at rest (a fill particle: that of the surface it lies under, or for sand and snow the
     photograph's on its rest ray); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
-    takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior.
+    takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
+    relief (P,) how much a grain of sand or snow is lit from above once its material flows
+    (interior.grain_relief; 0 for the other materials).
     """
 
     rest_means: torch.Tensor
@@ -78,6 +80,7 @@ class Particles(NamedTuple):
     rest_seen: torch.Tensor
     rest_normals: torch.Tensor
     surface: torch.Tensor
+    relief: torch.Tensor
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(P, 3) drawn positions (m), (P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,)
@@ -127,6 +130,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
                                                 opacities.cpu().numpy())
     rest_colors = torch.cat([colors, fill_colors])
     grain_from = torch.where(t(granular)[:, None], on_rest_ray, rest_colors).cpu().numpy()
+    shaded_grains = grain_colours(grain_from, trajectories.material_id)
     rest_means = torch.cat([means, fill_means])
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
@@ -138,10 +142,11 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
         grain_opacities=torch.where(spacing.isfinite(), t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
         colors=rest_colors,
-        grain_colors=t(grain_colours(grain_from, trajectories.material_id)).to(colors.dtype),
+        grain_colors=t(shaded_grains).to(colors.dtype),
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
         rest_normals=torch.cat([normals, normals[under]]),
-        surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]))
+        surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
+        relief=t(grain_relief(shaded_grains, trajectories.material_id)))
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
@@ -165,9 +170,13 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
-            render = splat.rasterize(means, opacities, torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1),
-                                     camera,
-                                     covariances=covariances)
+            # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body
+            bodies, cap_means, cap_covariances, cap_opacities, cap_colors = lit_caps(
+                means, covariances, opacities, colors, particles.relief * particles.mixing.so_far, camera)
+            features = torch.cat([torch.cat([bodies, surface_weights[:, None].to(colors.dtype)], 1),
+                                  torch.nn.functional.pad(cap_colors, (0, 1))])
+            render = splat.rasterize(torch.cat([means, cap_means]), torch.cat([opacities, cap_opacities]), features,
+                                     camera, covariances=torch.cat([covariances, cap_covariances]))
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA

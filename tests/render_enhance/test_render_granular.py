@@ -9,13 +9,17 @@ against the share of each colour at rest and against the lattice's spacing."""
 import cv2
 import numpy as np
 import pytest
+import torch
 from scipy.spatial import cKDTree
+
+import splat
 
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact
 from schemas.scene import PhysicsConfig
-from stages.render.interior import EDGE_PX, GRAIN_SHADE, grain_colours, grain_offsets, rest_ray_colours
-from stages.render.render import render_video
+from stages.render.interior import (EDGE_PX, GRAIN_SHADE, grain_colours, grain_offsets, grain_relief, grain_shapes,
+                                    lit_caps, rest_ray_colours)
+from stages.render.render import render_camera, render_video, rendered_particles
 from stages.simulate.simulation import Simulation
 
 SIZE, FOCAL, RADIUS, LENGTH, DISTANCE = 96, 480.0, 0.06, 0.18, 1.0
@@ -91,6 +95,65 @@ def test_the_heap_keeps_both_colours(heap):
     last = orange_share(coarse.rgb[-1], coarse.alpha[-1])
     for share, rest in ((last, at_rest), (1 - last, 1 - at_rest)):
         assert abs(share - rest) <= 0.4 * rest, f"orange {100 * at_rest:.0f} % at rest, {100 * last:.0f} % in the heap"
+
+
+def test_the_heap_shows_the_colour_of_the_sand_in_front(heap):
+    """Whatever the sand's motion brings to the heap's surface, the render shows its colour: the last
+    frame's orange share equals, within 3 points, the share of its pixels in front of which lie particles
+    whose rest ray meets the photograph's orange half (the render's own particles, shapes and depth
+    order, each drawn as 1 if orange and 0 if not)."""
+    gaussians, trajectories, coarse = heap
+    camera = render_camera(gaussians, SIZE)
+    particles = rendered_particles(gaussians, trajectories, camera, "cpu")
+    orange = trajectories.rest_positions[:, 0] < 0  # its rest ray meets the photograph left of the axis
+    with torch.no_grad():
+        for F, positions in zip(trajectories.F, trajectories.positions):
+            means, covariances, opacities, _, _ = particles.at(torch.as_tensor(F), torch.as_tensor(positions))
+        drawn = splat.rasterize(means, opacities, torch.as_tensor(orange[:, None], dtype=means.dtype), camera,
+                                covariances=covariances)
+    solid = drawn.alpha > 0.5
+    in_front = float(drawn.features[solid, 0].sum() / drawn.alpha[solid].sum())
+    assert 0.1 < in_front < 0.9
+    assert abs(orange_share(coarse.rgb[-1], coarse.alpha[-1]) - in_front) < 0.03
+
+
+def test_a_grain_is_lit_from_above():
+    """A round grain of sand alone, its cap drawn over it (lit_caps), seen from the side, against a sphere
+    of shading 1 + k y, k its relief (grain_relief) and y the height over its disc in radii: over its cap's
+    picture and over the rest of its picture, its brightness over its colour's is the sphere's shading
+    averaged over those pixels (within 0.02: the cap's edge is antialiased over a few pixels), and over
+    the whole grain 1 (within 2 %: it keeps its colour).
+    A white grain (snow) has no relief, nor has jelly: no cap, colour unchanged."""
+    colour = np.array([[0.3, 0.45, 0.2]])
+    sand = np.array([M.PRESETS.index("sand")])
+    relief = grain_relief(colour, sand)
+    albedo = colour[0] @ [0.299, 0.587, 0.114]
+    assert relief[0] == pytest.approx((1 - albedo) / (1 + albedo))
+    np.testing.assert_array_equal(grain_relief(np.ones((1, 3)), sand), 0.0)
+    np.testing.assert_array_equal(grain_relief(colour, np.array([M.PRESETS.index("jelly")])), 0.0)
+    size, focal, spacing = 201, 2000.0, 0.03
+    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
+    shape, opacity = grain_shapes(np.full(1, spacing ** 3), np.full(1, spacing), sand, np.ones(1))
+    shape = np.eye(3) * np.cbrt(np.linalg.det(shape[0]))  # a round grain, as the sphere
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape[None]), t(opacity), t(colour)
+    body, cap_means, cap_covariances, cap_opacities, cap_colours = lit_caps(means, covariances, opacities, colours,
+                                                                            t(relief), camera)
+    grain = splat.rasterize(torch.cat([means, cap_means]), torch.cat([opacities, cap_opacities]),
+                            torch.cat([body, cap_colours]), camera, covariances=torch.cat([covariances, cap_covariances]))
+    cap = splat.rasterize(cap_means, cap_opacities, torch.ones(1, 1), camera, covariances=cap_covariances).alpha.numpy()
+    brightness = grain.features.numpy() @ [0.299, 0.587, 0.114] / grain.alpha.numpy().clip(1e-6) / albedo
+    alone = splat.rasterize(means, opacities, torch.ones(1, 1), camera, covariances=covariances).alpha.numpy() > 0.5
+    rows = np.nonzero(alone.any(1))[0]
+    centre, radius = (rows[0] + rows[-1] + 1) / 2, (rows[-1] + 1 - rows[0]) / 2
+    sphere = 1 + relief[0] * (centre - np.arange(size)[:, None] - 0.5) / radius * np.ones(size)
+    for part in (alone & (cap > 0.5), alone & (cap <= 0.5)):
+        assert part.sum() > 100
+        assert abs(brightness[part].mean() - sphere[part].mean()) < 0.02
+    assert abs(brightness[alone].mean() - 1) < 0.02
+    unlit = lit_caps(means, covariances, opacities, colours, torch.zeros(1), camera)
+    np.testing.assert_array_equal(unlit[0].numpy(), colour.astype(np.float32))
+    assert len(unlit[1]) == 0
 
 
 def test_grains_are_the_size_of_the_lattice(heap):
