@@ -3,17 +3,23 @@
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
+# The demo's part (the stages, the examples' images) first, the tests' and the optional backends' after.
+DEMO_INSTALLED := $(VENV)/.installed-demo
 INSTALLED := $(VENV)/.installed
 
 .PHONY: demo test browser debug-kernels
 
-$(INSTALLED): pyproject.toml
+# One resolver run; --no-compile: the modules a run imports are byte-compiled then, not all of torch's now.
+$(DEMO_INSTALLED): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet torch==2.13.0
-	$(BIN)/pip install --quiet -e ".[test,examples,reconstruct,diffusion,setup]"
+	$(BIN)/pip install --quiet --no-compile torch==2.13.0 -e ".[examples,reconstruct]"
 	touch $@
 
-demo: $(INSTALLED)
+$(INSTALLED): $(DEMO_INSTALLED)
+	$(BIN)/pip install --quiet --no-compile -e ".[test,examples,reconstruct,diffusion,setup]"
+	touch $@
+
+demo: $(DEMO_INSTALLED)
 	$(BIN)/snakemake --cores 2
 
 # One pytest-xdist worker per core; tests/conftest.py keeps each module that shares a fixture on one.
