@@ -248,10 +248,10 @@ def _chromaticity(rgb: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 GRANULAR_COLUMNS = ["scene", "colour shares at frame 0", "in the last frame", "of the particles in front",
                     "largest share change %", "against the particles in front %", "grain px (spacing)",
                     "sharpness ratio last 1/2 s", "enhanced over coarse"]
-NEW_GRANULAR = ("wheel",)
+NEW_GRANULAR = ("wheel", "shuttle_sand")
 """Photographs new to the examples (benchmarks/scenes) made of sand, whose workflow results (NAME/gaussians.h5,
 trajectories.h5 and coarse.h5 under --new-results) the granular section measures beside the examples':
-scikit-image's colour wheel."""
+scikit-image's colour wheel, and the astronaut's model shuttle (white orbiter, brown tank)."""
 
 
 def _shares_in_front(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
@@ -451,8 +451,8 @@ SECTIONS = {
                      "and side IoU 0.8 on the capsule."]),
     "granular": (granular_section, GRANULAR_COLUMNS,
                  "Granular material keeps its colours",
-                 """The granular examples (sand, snow) and the colour wheel as sand (benchmarks/scenes/wheel, new to
-                 the examples) from the workflow's results: the object's two main colours at frame 0 (k-means of the
+                 """The granular examples (sand, snow), the colour wheel and the astronaut's model shuttle as sand
+                 (benchmarks/scenes/wheel, shuttle_sand: new to the examples) from the workflow's results: the object's two main colours at frame 0 (k-means of the
                  coarse render's chromaticity, colour over its sum, over the pixels of alpha > 0.5), the share of
                  the heap's pixels nearer each in the last frame; the share of the pixels in front of which lie
                  particles of each photographed colour (pm-render's own particles, shapes and depth order, each
@@ -466,7 +466,9 @@ SECTIONS = {
                   "in front within 1 point, and 87 % of its visible pixels come from the top 30 % of the body at "
                   "rest (its top, mostly orange, falls over the heap's face). The wheel's near-black pixels (41 % "
                   "of its heap) have no stable chromaticity: there the render's class and the particles' agree on "
-                  "87 % of the pixels, on 97-98 % of the others.",
+                  "87 % of the pixels, on 97-98 % of the others. The shuttle (white orbiter, brown tank) keeps "
+                  "both colours within the target: its tank spreads over the heap's top, the orbiter's white "
+                  "lines its front.",
                   "The sharpness ratio against the photograph measures the photograph: 77 % of the logo "
                   "photograph's Laplacian variance lies in 5 % of its pixels (ink lines, the white band), and the "
                   "wheel's photograph is a smooth gradient. The flow backend keeps the grains pm-render draws "
@@ -476,8 +478,8 @@ SECTIONS = {
                   "wheel 285 before, 354 after (1.00, 1.00); shares unchanged (logo 68 % / 32 %, wheel 16 % / 84 % "
                   "before, 17 % / 83 % after).",
                   "The logo: results/logo's gaussians.h5 and trajectories.h5 (make demo) rendered by this commit "
-                  "into --results; the wheel: pm-reconstruct, pm-simulate, pm-render and pm-enhance of "
-                  "benchmarks/scenes/wheel into --new-results.",
+                  "into --results; the wheel and the shuttle: pm-reconstruct, pm-simulate, pm-render and "
+                  "pm-enhance of benchmarks/scenes/NAME into --new-results.",
                   "On tests/render_enhance/test_render_granular.py's log seen end-on (front half orange half "
                   "green, its unseen side green): orange 50 % at frame 0, 15 % of the heap with the colour of "
                   "the nearest surface Gaussian (before decision 0023), 49 % with the rest-ray colour."]),

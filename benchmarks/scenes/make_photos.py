@@ -8,6 +8,7 @@
 - coin/:       `coins`, the large coin at the right as a 3 cm metal disc seen from 80 degrees above.
 - wheel/:      `colorwheel` on a light grey page, a 25 cm disc of coloured sand that collapses to a heap
                (benchmarks/quality.py, granular).
+- shuttle_sand/: `astronaut`, the model shuttle behind her (white orbiter, brown tank) as 30 cm of sand.
 
 Usage: python benchmarks/scenes/make_photos.py
 """
@@ -48,3 +49,4 @@ if __name__ == "__main__":
     page = np.full((420, 620, 3), 235, np.uint8)
     page[25:395, 125:496] = skimage.data.colorwheel()
     write_image(HERE / "wheel" / "photo.png", cv2.cvtColor(page, cv2.COLOR_RGB2BGR))
+    write_image(HERE / "shuttle_sand" / "photo.png", cv2.cvtColor(skimage.data.astronaut(), cv2.COLOR_RGB2BGR))
