@@ -3,7 +3,7 @@
 A photographed object is in equilibrium. Its shape is the loaded shape, but a
 simulation that starts from it with no stress lets it fall into its own
 weight: it sags by twice its static deflection, rings and, on a narrow
-support, rocks. The settle (simulation.Simulation.settle, `Relaxation`) finds
+support, rocks. The settle (simulation.Simulation.settle, quasi_static.py) finds
 the stress of the loaded state: dynamic relaxation under gravity and the
 ground with every particle pinned where the photograph has it
 (MPMSolver.pin), so that velocities and deformation gradients evolve but the
@@ -34,19 +34,13 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-import warp as wp
 from scipy.spatial import ConvexHull, QhullError
 
-from .conditions import inertia_about_centre
 from .constitutive import MIN_STRETCH, lame_parameters
-from .state import Particles
 
 log = logging.getLogger("physmotion.simulate")
 
-# The settle stops once a kinetic energy peak is below this fraction of the first (the sag's), and
-# lasts at most this many periods of the slowest body's fundamental mode. The fraction is small because
-# a round body's roll on its foot is far softer than its sag (docs/decisions/0002-settle.md).
-RELAXED = 1.0e-7
+# The settle (quasi_static.py) lasts at most this many periods of the slowest body's fundamental mode.
 SETTLE_PERIODS = 10.0
 # ... and at most this share of the run's substeps (docs/decisions/0020-settle-where-it-matters.md).
 SETTLE_SHARE = 0.2
@@ -61,9 +55,6 @@ TURN_DEG = 1.0
 # A settle whose kinetic energy has not peaked once in this many periods is still falling: the body
 # touches the ground on too small a contact (a soft ball on its lowest point) to stand as photographed.
 FOOTLESS_PERIODS = 2.0
-# Substeps between takings out of the bodies' drift and spin: it costs about a substep's time (22 ms for
-# 70k particles), and a neutral roll gathers little in this many.
-RIGID_MOTION_EVERY = 10
 # A body whose settled stress is past its yield stress in more than this share of its mass is named:
 # it will yield there in the run (a few particles at the rim of a contact patch do not show).
 OVERSTRESSED_SHARE = 0.01
@@ -222,7 +213,7 @@ def warn_giving_way(k: int, material, rest: np.ndarray, settled: np.ndarray, mas
     """Name object k and return True when, held in its photographed shape for `seconds` of settle, it was
     still giving way: it went (settled (N,3) against rest (N,3) m, masses (N,) kg) more than GIVING_WAY_FACTOR
     times an elastic column's sag of its height (plus SAG_CELLS of a `cell`) down, or turned more than
-    TURN_DEG. A body that moved less stands, whether or not its relaxation reached RELAXED."""
+    TURN_DEG. A body that moved less stands, whether or not its relaxation reached quasi_static.RELAXED."""
     height = float(np.ptp(rest[:, 1]))
     column = column_sag(material, height, gravity)
     sag = float(np.max(rest[:, 1] - settled[:, 1]))
@@ -246,94 +237,3 @@ def warn_footless(k: int, material, periods: float, seconds: float) -> None:
                 "and sags into its weight from t = 0, as a soft body set down on a point would. A stiffer material "
                 "(objects[%d].material.youngs_modulus) sags less", k, material.preset, material.youngs_modulus,
                 periods, seconds, k)
-
-
-@wp.struct
-class RelaxationSums:
-    """What the settle sums over the particles each substep."""
-
-    displacement: wp.array(dtype=wp.vec3)  # (P,) summed v dt, m
-    kinetic: wp.array(dtype=wp.float64)  # (1,) this substep's sum of m |v|^2 / 2, J
-
-
-@wp.kernel
-def relaxation_sums(particles: Particles, dt: float, sums: RelaxationSums):
-    """displacement_p += dt v_p, and the kinetic energy sum m_p |v_p|^2 / 2 into kinetic[0] (J)."""
-    p = wp.tid()
-    u = particles.v[p]
-    sums.displacement[p] = sums.displacement[p] + dt * u
-    wp.atomic_add(sums.kinetic, 0, wp.float64(0.5 * particles.mass[p] * wp.dot(u, u)))
-
-
-class Relaxation:
-    """Dynamic relaxation by kinetic damping: run undamped, and whenever the kinetic energy has passed a
-    peak, stop every particle. At a peak each mode passes its equilibrium, so stopping there leaves it
-    at rest where it should be, whatever its period (the slow rocking of a soft body on a narrow
-    support included, which no one damping rate reaches in time).
-
-    The load is the deformation's: every RIGID_MOTION_EVERY substeps each body's rigid motion but its
-    fall (its horizontal drift and its spin about its centre of mass) is taken out. A ball on a point of slip
-    ground is in neutral balance, and the roll its settle would gather is the run's to show, not the
-    stress's.
-
-    `step(solver, dt)` after each substep of dt seconds returns True once a peak's energy is below RELAXED
-    of the first. `displacement()` (P,3) m sums v dt: where the particles would have gone, had they not
-    been pinned (MPMSolver.pin), to first order the body's static deflection. The sums run where the
-    solver's arrays live; one number a substep comes back.
-
-    Args:
-        solver: the MPMSolver, whose masses and device are used; positions: (P,3) rest positions,
-            simulation frame (+y up), m; bodies: the particle indices of each body that settles.
-    """
-
-    def __init__(self, solver, positions: np.ndarray, bodies: list[np.ndarray]):
-        self.masses = solver.mass.numpy().astype(np.float64)
-        self.bodies = bodies
-        self.offsets, self.inverse_inertia = [], []
-        for members in self.bodies:
-            centre, inertia = inertia_about_centre(positions[members], self.masses[members])
-            self.offsets.append(positions[members] - centre)
-            self.inverse_inertia.append(np.linalg.pinv(inertia))
-        self._sums = RelaxationSums()
-        self._sums.displacement = wp.zeros(len(self.masses), dtype=wp.vec3, device=solver.device)
-        self._sums.kinetic = wp.zeros(1, dtype=wp.float64, device=solver.device)
-        self.steps = 0
-        self.first = self.previous = 0.0
-        self.rising = True
-        self.peaks = 0
-        self.residual = 1.0
-
-    def displacement(self) -> np.ndarray:
-        """(P,3) m: the summed v dt of every particle."""
-        return self._sums.displacement.numpy().astype(np.float64)
-
-    def _without_drift_and_spin(self, v: np.ndarray) -> np.ndarray:
-        """v (P,3) less each body's horizontal mean velocity and its rigid rotation about its centre of mass."""
-        for members, r, inverse in zip(self.bodies, self.offsets, self.inverse_inertia):
-            m, u = self.masses[members], v[members]
-            drift = m @ u / m.sum()
-            drift[1] = 0.0
-            omega = inverse @ np.sum(m[:, None] * np.cross(r, u), axis=0)
-            v[members] = u - drift - np.cross(omega, r)
-        return v
-
-    def step(self, solver, dt: float) -> bool:
-        self.steps += 1
-        if self.steps % RIGID_MOTION_EVERY == 0:
-            v = self._without_drift_and_spin(solver.v.numpy().astype(np.float64))
-            solver.v.assign(v.astype(np.float32))
-        self._sums.kinetic.zero_()
-        wp.launch(relaxation_sums, dim=len(self.masses), device=solver.device,
-                  inputs=[solver.particles, dt, self._sums])
-        energy = float(self._sums.kinetic.numpy()[0])
-        if energy < self.previous and self.rising:  # just past a peak
-            self.peaks += 1
-            self.first = self.first or self.previous
-            self.residual = self.previous / self.first if self.first > 0 else 0.0
-            solver.v.zero_()
-            solver.C.zero_()
-            self.previous, self.rising = 0.0, True
-            return self.residual < RELAXED
-        self.rising = energy >= self.previous
-        self.previous = energy
-        return False

@@ -25,10 +25,11 @@ from schemas.camera import project_points
 from schemas.materials import PRESETS
 
 from . import domain, rest_state
-from .conditions import Conditions, inertia_about_centre
+from .conditions import Conditions, inertia_about_centre, largest_acceleration
 from .constitutive import elastic_energy, wave_speed
 from .fill import carry_volume, fill_object, lattice_spacing, silhouette_gap
 from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
+from .quasi_static import RELAXED, QuasiStatic
 from .rigid import RigidBodies
 
 log = logging.getLogger("physmotion.simulate")
@@ -132,6 +133,7 @@ class Simulation:
                                                  0.5 * spacing, device))
         self.conditions = Conditions(physics.conditions, self.rest_world, self.object_id, self.masses, self.Q,
                                      self.gravity_frame, device, scene_file)
+        self._pushes = self._condition_pushes()
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
         self._free_logged = self._outside_logged = 0
         self._camera = None if silhouette is None else (silhouette[1], silhouette[0].shape)  # K, (H, W)
@@ -262,16 +264,34 @@ class Simulation:
             if self.ground_y is not None:
                 rest_state.warn_unsupported(k, x, centre, self.ground_y, self.spacing)
 
-    def substep_size(self, max_speed: float) -> float:
-        """physics.dt, or the CFL substep for particles up to max_speed (m/s)."""
-        return self.physics.dt if self.physics.dt is not None else self._cfl_substep(max_speed)
+    def substep_size(self, max_speed: float, since: float = 0.0, until: float = math.inf) -> float:
+        """physics.dt, or the CFL substep for particles up to max_speed (m/s) over since .. until (s)."""
+        return self.physics.dt if self.physics.dt is not None else self._cfl_substep(max_speed, since, until)
 
-    def _cfl_substep(self, max_speed: float) -> float:
-        """The CFL substep in s for particles up to max_speed (m/s), what a condition may give, and a frame
-        of free fall and of the conditions' forces; at most a frame."""
-        fall = (float(np.linalg.norm(self.gravity_world)) + self.conditions.acceleration) / self.physics.fps
-        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + self.speed_hint + fall,
-                                  1.0 / self.physics.fps)
+    def _cfl_substep(self, max_speed: float, since: float = 0.0, until: float = math.inf) -> float:
+        """The CFL substep in s for particles up to max_speed (m/s), what a condition acting between since and
+        until (s; by default the whole run) may give them, and a frame of free fall and of those conditions'
+        forces; at most a frame. A condition outside the window adds nothing: what it set moving before,
+        max_speed holds."""
+        speed, acceleration = 0.0, 0.0
+        for start, end, kick, push in self._pushes:
+            if start <= until and (end is None or end >= since):
+                speed, acceleration = max(speed, kick), max(acceleration, push)
+        fall = (float(np.linalg.norm(self.gravity_world)) + acceleration) / self.physics.fps
+        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + speed + fall, 1.0 / self.physics.fps)
+
+    def _condition_pushes(self) -> list[tuple[float, float | None, float, float]]:
+        """(start s, end s (None: to the end; an impulse's is its start), speed m/s it gives, largest acceleration
+        m/s^2 it gives, conditions.largest_acceleration) of each condition."""
+        pushes = []
+        for item in self.conditions.items:
+            c = item.condition
+            speed = float(np.linalg.norm(c.velocity)) if c.type in ("impulse", "velocity") else 0.0
+            body = self.rest_world[self.object_id == c.object]
+            push = largest_acceleration(c, self.Q.T @ item.to_sim, self.rest_world[item.members],
+                                        self.masses[item.members], body)
+            pushes.append((c.start_s, c.start_s if c.type == "impulse" else getattr(c, "end_s", None), speed, push))
+        return pushes
 
     def _lifted(self) -> np.ndarray:
         """Boolean (objects,) of the objects that an impulse or velocity at t = 0 lifts off the ground: their
@@ -313,10 +333,10 @@ class Simulation:
         what it found.
 
         The bodies that touch the ground or are held by a `fixed` condition at t = 0 and need it
-        (rest_state.why_not_settled) take up their own weight by dynamic relaxation with kinetic damping
-        (rest_state.Relaxation), every particle pinned at its rest position while its velocity and F
-        evolve; all others are held still meanwhile. Then every particle is at rest, keeping the
-        elastic F and history of the settled bodies.
+        (rest_state.why_not_settled) take up their own weight by kinetic damping (quasi_static.QuasiStatic),
+        every particle pinned at its rest position while its velocity and F evolve; all others are held
+        still meanwhile. Then every particle is at rest, keeping the elastic F and history of the settled
+        bodies.
         """
         s, rest_sim = self.solver, self.rest_sim
         deformable, skipped, held = self._settle_plan()
@@ -335,7 +355,7 @@ class Simulation:
         s.hold_yield(True)  # the photographed solid stands on its elastic stress; where that is past yield, the run yields
         s.pin(True)
         bodies = [np.flatnonzero(self.object_id == k) for k in deformable]
-        relaxation = rest_state.Relaxation(s, rest_sim, bodies)
+        relaxation = QuasiStatic(s, rest_sim, bodies)
         # a held body cannot fall: only the free ones can be footless
         can_fall = [k for k in deformable if not np.any(held[self.object_id == k])]
         per_period = period / dt
@@ -357,10 +377,11 @@ class Simulation:
                 break
             if time.perf_counter() - reported > SETTLE_LOG_EVERY_S:
                 reported = time.perf_counter()
-                log.info("settling: %d of at most %d substeps, %d kinetic peaks, the last %.1e of the first "
-                         "(stops below %.0e), %.0f s elapsed, at most ~%.0f s left", steps, most, relaxation.peaks,
-                         relaxation.residual, rest_state.RELAXED, reported - started,
-                         (reported - started) / steps * (most - steps))
+                per_step = (reported - started) / steps
+                log.info("settling: %d of at most %d substeps, %d kinetic peaks, the last %.1e of the first (stops "
+                         "below %.0e), %.0f s elapsed, ~%.0f s left at the peaks' rate (at most %.0f)", steps, most,
+                         relaxation.peaks, relaxation.residual, RELAXED, reported - started,
+                         per_step * min(most - steps, relaxation.substeps_left()), per_step * (most - steps))
         s.pin(False)
         s.hold_yield(False)
         result.substeps, result.relaxation_s, result.wall_s = steps, steps * dt, time.perf_counter() - started
@@ -378,7 +399,7 @@ class Simulation:
         for k in deformable:
             sel = self.object_id == k
             rest_state.warn_overstressed(k, self.materials[k], rest_sim[sel], settled_F[sel], self.masses[sel])
-            if (relaxation.residual >= rest_state.RELAXED and not np.any(held[sel])
+            if (relaxation.residual >= RELAXED and not np.any(held[sel])
                     and rest_state.warn_giving_way(k, self.materials[k], rest_sim[sel], settled[sel], self.masses[sel],
                                                    result.relaxation_s, g, self.grid.dx)):
                 result.giving_way.append(k)
@@ -417,7 +438,7 @@ class Simulation:
             if asleep:
                 log.info("frame %d/%d: a condition acts, the simulation goes on", f, T - 1)
                 asleep = False
-            dt = self.substep_size(float(diag["max_speed"][f - 1]))
+            dt = self.substep_size(float(diag["max_speed"][f - 1]), times[f - 1], times[f])
             n = max(1, math.ceil((times[f] - t) / dt - 1e-9))
             h = (times[f] - t) / n
             if n > self.physics.max_substeps_per_frame:

@@ -145,6 +145,21 @@ def test_cfl_substep_shrinks_with_stiffness_and_speed():
     assert domain.cfl_substep(0.01, [soft], 10.0) < domain.cfl_substep(0.01, [soft], 0.0)
 
 
+def test_a_condition_bounds_the_substep_only_in_the_frames_it_acts():
+    """A 3 N push from 0.1 to 0.2 s on a 10 cm jelly box shortens the CFL substep of the frames it touches
+    (a frame of its acceleration, F / M, added to the speeds); before and after them the substep is that of
+    the same box with no push."""
+    means, oid = boxes(((0, 0, 0.5), (0.1, 0.1, 0.6)), spacing=0.01)
+    push = {"type": "force", "region": {"box": [0, 0, 0, 1, 1, 1]}, "force": [3.0, 0, 0], "start_s": 0.1, "end_s": 0.2}
+    pushed, still = (Simulation(PhysicsConfig(grid=16, fps=20, duration_s=0.4, conditions=c), [M.Jelly()], means, oid)
+                     for c in ([push], []))
+    alone = still._cfl_substep(0.0)
+    assert pushed._cfl_substep(0.0, 0.0, 0.05) == pytest.approx(alone)
+    assert pushed._cfl_substep(0.0, 0.25, 0.3) == pytest.approx(alone)
+    expected = domain.cfl_substep(pushed.grid.dx, [M.Jelly()], (9.81 + 3.0 / pushed.masses.sum()) / 20, 0.05)
+    assert pushed._cfl_substep(0.0, 0.1, 0.15) == pytest.approx(expected) and expected < alone
+
+
 def make_gaussians(path, means, object_id):
     H, W = 120, 160
     f = H / 2 / math.tan(math.radians(20))
