@@ -13,10 +13,12 @@ cross-fades from diffusion at the seam to exemplar past twice the dilation.
 
 The objects' own shadows go too: an object that moves away takes its shadow
 with it (the enhancement draws it anew under the object, stages/enhance/shadow.py).
-A shadow is a smooth darkening of the ground near an object, so it is found as
-the filled photograph's brightness, smoothed past its texture, against the
-brightness around it (a high percentile over twice the object's size), and
-divided out of every channel (docs/decisions/0025-shadows.md).
+A shadow is a smooth darkening of the ground that starts at an object's foot, so
+it is found as the photograph's brightness (the hole filled by diffusion),
+smoothed past its texture, against the brightness around it and below it (a
+high percentile over twice the object's size), given the photograph's own
+edges, and divided out of every channel before the hole is filled
+(docs/decisions/0025-shadows.md).
 """
 from __future__ import annotations
 
@@ -46,14 +48,21 @@ coffee scene, whose ring shows around the cup at rest: frame-0 PSNR 36.7 dB with
 34.4 / 36.1 / 36.5 dB with 1 / 2 / 3 radii, 32.6 dB with exemplar alone."""
 
 
-SHADOW_WORKING_PX = 64
+SHADOW_WORKING_PX = 128
 """The shadow is estimated on a copy in which the objects' size (the square root of their pixel
-count) is this many pixels, smoothed by one of them: the example ball's shadow is 8 of them tall
-(at 32 the hard shadow band of benchmarks/scenes' loaf, 6 px under its edge, was diluted away)."""
+count) is this many pixels, smoothed by one of them: the example ball's shadow is 16 of them tall;
+the hard shadow band of the loaf, 24 px under its edge, keeps its depth (at 64 its edge was a ramp as
+wide as the band, and a third of its darkening stayed; at 32 it was diluted away)."""
+SHADOW_REFERENCE_PX = 64
+"""The unshadowed brightness (SHADOW_REFERENCE), smooth by its nature, is taken on a copy in which the
+objects are this many pixels across: its percentile window costs the square of this."""
 SHADOW_REFERENCE = (2.0, 80)
 """The unshadowed brightness at a pixel: this percentile of the smoothed brightness over a window of
 this many object sizes across and a quarter of that high (a shadow fills less than a fifth of it;
-the ground's brightness changes with its distance, from row to row)."""
+the ground's brightness changes with its distance, from row to row), the lesser of the window centred
+on the pixel and the one from its row down. Below a pixel of the ground lies more of the same ground,
+nearer the camera; above it may lie a lighter wall, by which the floor along their edge would read as
+shadowed. Around it lies the same surface where the one below differs (a saucer on a lighter table)."""
 SHADOW_REACH = 1.0
 """Shadows are looked for up to this many object sizes from the objects' masks."""
 SHADOW_DEPTH = (0.08, 0.16)
@@ -64,41 +73,98 @@ TEXTURE_SPREADS = 4.0
 """A pixel counts as darkened only past this many robust standard deviations of the darkening away
 from the objects, where the ground's own texture left after smoothing sets it: the exemplar fill of
 a coarse periodic texture (tests/reconstruct) would otherwise read as a shadow."""
+FOOT = 0.2
+"""An object stands on the ground with the lowest part of its outline, this share of its height: a cast
+shadow starts at that contact, so a darkening that touches no object's foot (a dark room behind the
+object, a dark patch beside its top) is no shadow of it. An object cut by the photograph's lower
+border shows no contact and is given no shadow."""
 PENUMBRA = 0.1
 """Around the pixels found shadowed, this share of the objects' size is taken as their penumbra,
 darkened by however little: cut off at SHADOW_DEPTH, its edge would outline the shadow that left."""
+EDGE_RADIUS = 2
+"""Half the side of the guided filter's window, in pixels of the working copy (the blur it undoes is one)."""
+EDGE_EPS = 1e-3
+"""Regularisation of the guided filter (He et al. 2010) that gives the shadow found on the working copy the
+photograph's own edges (brightness in [0, 1], squared): a hard-edged shadow, smoothed on the copy and
+divided out, left its outline; the ground's texture varies the brightness more than this and stays."""
 MAX_SHADOW = 0.8
 """Darkening divided out at most: deeper, the ground's colour is mostly noise."""
+
+
+def touching_feet(taken: np.ndarray, labels: np.ndarray, reach_px: int) -> np.ndarray:
+    """(h, w) bool: the connected parts of ``taken`` (h, w bool) that come within ``reach_px`` of an
+    object's foot (FOOT; ``labels`` h x w, 0 the background). Objects touching the lower border have none."""
+    feet = np.zeros(labels.shape, np.uint8)
+    for k in np.unique(labels[labels > 0]):
+        rows = np.nonzero((labels == k).any(1))[0]
+        if rows.max() >= labels.shape[0] - 1:
+            continue
+        lowest = rows.max() - FOOT * (rows.max() - rows.min() + 1)
+        feet[(labels == k) & (np.arange(labels.shape[0])[:, None] >= lowest)] = 1
+    feet = cv2.dilate(feet, np.ones((2 * reach_px + 1,) * 2, np.uint8))
+    count, parts = cv2.connectedComponents(taken.astype(np.uint8))
+    touching = np.unique(parts[(feet > 0) & taken])
+    return np.isin(parts, touching[touching > 0])
+
+
+def guided_filter(guide: np.ndarray, values: np.ndarray, radius: int, eps: float) -> np.ndarray:
+    """(H, W) float32: ``values`` (H, W) made locally linear in ``guide`` (H, W) over windows of
+    2 radius + 1 pixels (He, Sun and Tang 2010): smooth where the guide is, with its edges where they
+    coincide with the values'."""
+    box = lambda a: cv2.boxFilter(a, cv2.CV_32F, (2 * radius + 1,) * 2)  # noqa: E731
+    mean_guide, mean_values = box(guide), box(values)
+    covariance = box(guide * values) - mean_guide * mean_values
+    variance = box(guide * guide) - mean_guide * mean_guide
+    slope = covariance / (variance + eps)
+    return box(slope) * guide + box(mean_values - slope * mean_guide)
+
+
+def smoothed_copy(brightness: np.ndarray, size: float, working_px: int) -> tuple[float, np.ndarray]:
+    """The scale of a copy of ``brightness`` (H, W) in which objects ``size`` pixels across are
+    ``working_px`` across (at most 1), and that copy smoothed by one of their pixels."""
+    scale = min(1.0, working_px / max(size, 1.0))
+    height, width = brightness.shape
+    small = cv2.resize(brightness, (max(1, round(width * scale)), max(1, round(height * scale))),
+                       interpolation=cv2.INTER_AREA)
+    return scale, cv2.GaussianBlur(small, (0, 0), max(1.0, size * scale / working_px))
 
 
 def photographed_shadow(background: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """(H, W) float32 in [0, MAX_SHADOW]: how much the objects' shadows darken the (filled) photograph,
     0 where no shadow is found. Darkening is measured on the sRGB values' mean: a shadow scales linear
-    light, and so (up to sRGB's linear toe) scales sRGB values too."""
+    light, and so (up to sRGB's linear toe) scales sRGB values too. A shadow is darker than the ground
+    nearer the camera (SHADOW_REFERENCE) and touches an object's foot (FOOT)."""
     objects = labels > 0
     size = float(np.sqrt(objects.sum()))
     height, width = labels.shape
-    scale = min(1.0, SHADOW_WORKING_PX / max(size, 1.0))
-    small = (max(1, round(width * scale)), max(1, round(height * scale)))
-    brightness = cv2.resize(background.astype(np.float32).mean(-1), small, interpolation=cv2.INTER_AREA)
-    smooth = cv2.GaussianBlur(brightness, (0, 0), max(1.0, size * scale / SHADOW_WORKING_PX))
-    across = SHADOW_REFERENCE[0] * size * scale
+    full_brightness = background.astype(np.float32).mean(-1)
+    scale, smooth = smoothed_copy(full_brightness, size, SHADOW_WORKING_PX)
+    coarse_scale, coarse = smoothed_copy(full_brightness, size, SHADOW_REFERENCE_PX)
+    across = SHADOW_REFERENCE[0] * size * coarse_scale
     window = (2 * round(across / 8) + 1, 2 * round(across / 2) + 1)
-    unshadowed = ndimage.percentile_filter(smooth, SHADOW_REFERENCE[1], size=window, mode="nearest")
-    dark = np.clip(1 - smooth / np.maximum(unshadowed, 1.0), 0, MAX_SHADOW)
-    inside = cv2.resize(objects.astype(np.uint8), small, interpolation=cv2.INTER_NEAREST)
-    away = cv2.distanceTransform(1 - inside, cv2.DIST_L2, 3) / max(size * scale, 1e-6)
-    ground = dark[away > 0.25]
+    around, below = (cv2.resize(ndimage.percentile_filter(coarse, SHADOW_REFERENCE[1], size=window, mode="nearest",
+                                                          origin=(origin, 0)), smooth.shape[::-1],
+                                interpolation=cv2.INTER_LINEAR) for origin in (0, -(window[0] // 2)))
+    darkening = lambda unshadowed: np.clip(1 - smooth / np.maximum(unshadowed, 1.0), 0, MAX_SHADOW)  # noqa: E731
+    dark = darkening(np.minimum(around, below))
+    small_labels = cv2.resize(labels.astype(np.uint8), smooth.shape[::-1], interpolation=cv2.INTER_NEAREST)
+    away = cv2.distanceTransform((small_labels == 0).astype(np.uint8), cv2.DIST_L2, 3) / max(size * scale, 1e-6)
+    ground = darkening(around)[away > 0.25]
     spread = 1.4826 * float(np.median(np.abs(ground - np.median(ground)))) if ground.size else 0.0
     low = max(SHADOW_DEPTH[0], TEXTURE_SPREADS * spread)
     taken = np.clip((dark - low) / (SHADOW_DEPTH[1] - SHADOW_DEPTH[0]), 0, 1)
     near = np.clip((SHADOW_REACH - away) / (0.25 * SHADOW_REACH), 0, 1)
+    reach = max(1, round(PENUMBRA * size * scale))
+    taken = np.where(touching_feet((taken * near) > 0, small_labels, reach), taken, 0.0)
     # around what is surely shadow its faint penumbra is shadow too, however little it darkens
     core = (taken * taken * (3 - 2 * taken)).astype(np.float32)
-    reach = 2 * max(1, round(PENUMBRA * size * scale)) + 1
-    penumbra = cv2.GaussianBlur(cv2.dilate(core, np.ones((reach, reach), np.uint8)), (0, 0), 1.0)
-    shadow = dark * np.maximum(core, penumbra) * near
-    return np.clip(cv2.resize(shadow, (width, height), interpolation=cv2.INTER_LINEAR), 0, MAX_SHADOW)
+    penumbra = cv2.GaussianBlur(cv2.dilate(core, np.ones((2 * reach + 1,) * 2, np.uint8)), (0, 0), 1.0)
+    shadow = cv2.resize(dark * np.maximum(core, penumbra) * near, (width, height), interpolation=cv2.INTER_LINEAR)
+    if not shadow.any():
+        return shadow.astype(np.float32)
+    edges = guided_filter(full_brightness / 255, shadow.astype(np.float32), max(1, round(EDGE_RADIUS / scale)), EDGE_EPS)
+    return np.clip(np.where(cv2.dilate((shadow > 0).astype(np.uint8), np.ones((3, 3), np.uint8)) > 0, edges, 0),
+                   0, MAX_SHADOW).astype(np.float32)
 
 
 def without_shadow(background: np.ndarray, shadow: np.ndarray) -> np.ndarray:
@@ -136,16 +202,18 @@ def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
     hole = cv2.dilate((labels > 0).astype(np.uint8), kernel)
     if not hole.any():
         return photo.copy()
+    # the shadow is found around the hole filled by diffusion, and divided out before the exemplar
+    # fill, so that no patch copied into the hole carries it
+    shadow = photographed_shadow(cv2.inpaint(photo, hole, DIFFUSION_RADIUS_PX, cv2.INPAINT_TELEA), labels)
+    photo = without_shadow(photo, shadow)
     rim = cv2.inpaint(photo, hole, DIFFUSION_RADIUS_PX, cv2.INPAINT_TELEA)
     try:
         texture = exemplar_fill(photo, hole > 0)
     except ValueError as error:  # no whole patch of background left at some level of the pyramid
         log.warning("background: %s; the objects cover too much of the photograph to copy patches from, "
                     "so their place is filled by diffusion alone", error)
-        filled = np.where(hole[..., None] > 0, rim, photo)
-        return without_shadow(filled, photographed_shadow(filled, labels))
+        return np.where(hole[..., None] > 0, rim, photo)
     inside_px = cv2.distanceTransform(hole, cv2.DIST_L2, 5)  # from the nearest known pixel
     diffused = np.clip(1 - (inside_px - 0.5) / (SEAM_WIDTH * radius), 0, 1)[..., None]
     filled = diffused * rim + (1 - diffused) * texture
-    filled = np.where(hole[..., None] > 0, filled + 0.5, photo).astype(np.uint8)
-    return without_shadow(filled, photographed_shadow(filled, labels))
+    return np.where(hole[..., None] > 0, filled + 0.5, photo).astype(np.uint8)
