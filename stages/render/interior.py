@@ -17,7 +17,9 @@ snow become hard grains of about a lattice spacing, of varied sizes, elongated a
 random, each moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`:
 a heap shows no lattice), each in the photograph's colour where its rest position projects
 (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it belongs to, so its heap
-shows both), each a little brighter or darker at the same hue (:func:`grain_colours`).
+shows both), each a little brighter or darker at the same hue (:func:`grain_colours`), each lit
+from above: a brighter cap over a darker body, by its colour's albedo (:func:`grain_relief`,
+:func:`lit_caps`).
 
 At rest the interior must stay hidden behind the surface, so that frame 0 is the
 reconstruction's render. The lattice's outer cells reach up to a cell past the
