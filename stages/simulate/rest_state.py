@@ -170,23 +170,21 @@ def warn_crushed_by_weight(k: int, material, height: float, gravity: float) -> N
 
 def warn_unsupported(k: int, x: np.ndarray, centre: np.ndarray, ground_y: float, spacing: float) -> None:
     """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame, m)
-    up: seen from above, its centre of mass lies more than half a lattice `spacing` outside the hull of its
-    points within half a spacing of the ground (its contact, as the ground meets a rigid body's points,
-    rigid.RigidBodies), so it tips over from t = 0. A foot that ends a spacing above the ground carries
-    nothing until the body has tipped onto it; a round body's contact is a cap whose points lie within half
-    a spacing of its lowest point, under its centre of mass."""
-    foot = x[:, 1] <= ground_y + 0.5 * spacing
-    if not foot.any():
+    up: its centre of mass lies outside the hull of its points within a lattice `spacing` of the ground
+    (its contact patch, as the ground's nodes meet it), so it tips over at t = 0."""
+    if not np.any(x[:, 1] <= ground_y + 0.5 * spacing):
         return  # in flight
+    foot = x[:, 1] <= ground_y + spacing
     margin = support_margin(x[foot][:, [0, 2]], centre[[0, 2]])
-    if margin >= -0.5 * spacing:
+    if margin >= spacing:
         return
-    where = "%.1f mm outside it" % (-1e3 * margin) if math.isfinite(margin) else "over a line of contact, not an area"
+    where = ("%.1f mm outside it" % (-1e3 * margin) if margin < 0 else "%.1f mm inside its edge" % (1e3 * margin)
+             ) if math.isfinite(margin) else "over a line of contact, not an area"
     log.warning("object %d does not stand as reconstructed: its support (seen from above, the hull of its points "
                 "within %.1f mm of the ground) holds its centre of mass %s, so it tips over from t = 0 as that "
                 "shape would, rigid too. If the photographed object stands, its reconstruction is too thin or "
                 "leans where the photograph does not show it: hold its foot with a `fixed` condition "
-                "(physics.conditions) or add reconstruct.extra_views", k, 0.5e3 * spacing, where)
+                "(physics.conditions) or add reconstruct.extra_views", k, 1e3 * spacing, where)
 
 
 def warn_overstressed(k: int, material, rest: np.ndarray, F: np.ndarray, masses: np.ndarray) -> None:
