@@ -514,9 +514,8 @@ SECTIONS = {
                 "(tests/render_enhance/test_enhance_unseen.py) is at least 30.8 dB PSNR-Y from its photograph "
                 "past 30 degrees.",
                 "The clay's photograph has almost no fine detail, so any on its unseen side weighs heavily: it "
-                "shows light specks along the seam, where the render's silhouette Gaussians (which mix in the "
-                "wall) are re-lit up to 2.5 times because the fitted shading of the limb is the ambient alone, "
-                "and steps along the body's contours."]),
+                "shows steps along the body's contours and small blobs along the seam where the source map is "
+                "not smooth and the render, whose silhouette Gaussians mix in the wall, shows through."]),
     "shadows": (shadow_section, SHADOW_COLUMNS, "Shadows",
                 """Reconstructions moved sideways by their own width (pm-render of their Gaussians alone, at 320 px),
                 their backgrounds inpainted anew from the photograph: the photograph's shadow (the photograph over

@@ -299,7 +299,8 @@ class Continuation:
         continued = sample_at(a.continued, uv) * shading_now[..., None]
         return own * from_fine * gain + (1 - own) * continued, shading_then, sample_at(a.inside, uv)
 
-    def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray,
+                 unseen_from_photo: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Frame t's object colour from the photograph (h, w, 3) sRGB in [0, 255], the render re-shaded
         alike (h, w, 3), and where the photograph holds the pixel's surface (h, w) in [0, 1].
 
@@ -307,20 +308,30 @@ class Continuation:
             uv: (h, w, 2) the frame's smoothed source points at output resolution (flow.smooth_source).
             seen: (h, w) in [0, 1], how much of each pixel's surface the photograph saw.
             rendered: (h, w, 3) the render's colour, sRGB in [0, 255].
+            unseen_from_photo: the unseen surfaces' render gives way to the continued colour too
+                (enhance.hidden_surfaces "photo"); else only the seen ones' does.
         """
         shading_now, facing_now = self.shading_now(t)
         h, w = seen.shape
         moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
         still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
         direct, shading_direct, inside_direct = self.read(uv, shading_now, facing_now, still)
-        mirrored, shading_mirrored, inside_mirrored = self.read(self.mirror(uv), shading_now, facing_now,
+        mirrored_uv = self.mirror(uv)
+        mirrored, shading_mirrored, inside_mirrored = self.read(mirrored_uv, shading_now, facing_now,
                                                                 np.zeros_like(still))
         s = np.clip(seen, 0, 1)
         colour = s[..., None] * direct + (1 - s[..., None]) * mirrored
         inside = s * inside_direct + (1 - s) * inside_mirrored
         then = s * shading_direct + (1 - s) * shading_mirrored
-        # the render's colours carry the photograph's shading of their source, as the photograph does
+        # the render's colours carry the photograph's shading of their source, as the photograph does,
+        # where it recorded that source well; at its limb they are the Gaussians' compromise with the
+        # background beyond (re-lit by the limb's shading, the ambient alone, they were light specks along
+        # the seam): there the colour continued from the surface recorded well takes their place, and
+        # beyond its reach they are not re-lit
+        recorded = s * sample_at(self.albedo.recorded, uv) + (1 - s) * sample_at(self.albedo.recorded, mirrored_uv)
+        recorded = np.where(np.isfinite(uv[..., 0]), recorded, 1.0)[..., None]
         gain = np.clip(shading_now / np.maximum(then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)
-        gain = np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None]
-        relit_render = to_srgb(to_linear(rendered) * gain)
-        return to_srgb(colour).astype(np.float32), relit_render.astype(np.float32), inside.astype(np.float32)
+        gain = 1 + recorded * (np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None] - 1)
+        continued = (1 - recorded) * (inside if unseen_from_photo else s * inside)[..., None]
+        relit_render = (1 - continued) * to_linear(rendered) * gain + continued * colour
+        return to_srgb(colour).astype(np.float32), to_srgb(relit_render).astype(np.float32), inside.astype(np.float32)
