@@ -325,9 +325,9 @@ class Continuation:
         then = s * shading_direct + (1 - s) * shading_mirrored
         # the render's colours carry the photograph's shading of their source, as the photograph does,
         # where it recorded that source well; at its limb they are the Gaussians' compromise with the
-        # background beyond (re-lit by the limb's shading, the ambient alone, they were light specks along
-        # the seam): there the colour continued from the surface recorded well takes their place, and
-        # beyond its reach they are not re-lit
+        # background beyond (re-lit by the limb's shading, the ambient alone, they would be light specks
+        # along the seam): there the colour continued from the surface recorded well takes their place,
+        # and beyond its reach they are not re-lit
         recorded = s * sample_at(self.albedo.recorded, uv) + (1 - s) * sample_at(self.albedo.recorded, mirrored_uv)
         recorded = np.where(np.isfinite(uv[..., 0]), recorded, 1.0)[..., None]
         gain = np.clip(shading_now / np.maximum(then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)

@@ -50,9 +50,9 @@ coffee scene, whose ring shows around the cup at rest: frame-0 PSNR 36.7 dB with
 
 SHADOW_WORKING_PX = 128
 """The shadow is estimated on a copy in which the objects' size (the square root of their pixel
-count) is this many pixels, smoothed by one of them: the example ball's shadow is 16 of them tall;
-the hard shadow band of the loaf, 24 px under its edge, keeps its depth (at 64 its edge was a ramp as
-wide as the band, and a third of its darkening stayed; at 32 it was diluted away)."""
+count) is this many pixels, smoothed by one of them: the example ball's shadow is 16 of them tall, and
+the loaf's hard-edged shadow band, 24 px under it, keeps its depth; on a coarser copy its edge becomes a
+ramp as wide as the band, which divided out leaves the band's outline (0033-which-darkening-is-a-shadow.md)."""
 SHADOW_REFERENCE_PX = 64
 """The unshadowed brightness (SHADOW_REFERENCE), smooth by its nature, is taken on a copy in which the
 objects are this many pixels across: its percentile window costs the square of this."""
@@ -102,7 +102,7 @@ def touching_feet(taken: np.ndarray, labels: np.ndarray, reach_px: int) -> np.nd
         lowest = rows.max() - FOOT * (rows.max() - rows.min() + 1)
         feet[(labels == k) & (np.arange(labels.shape[0])[:, None] >= lowest)] = 1
     feet = cv2.dilate(feet, np.ones((2 * reach_px + 1,) * 2, np.uint8))
-    count, parts = cv2.connectedComponents(taken.astype(np.uint8))
+    _, parts = cv2.connectedComponents(taken.astype(np.uint8))
     touching = np.unique(parts[(feet > 0) & taken])
     return np.isin(parts, touching[touching > 0])
 
