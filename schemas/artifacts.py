@@ -26,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, model_validator
 
 from .files import write_file
 from .program import InputError
+from .solid import solids_of
 
 
 @dataclass(frozen=True)
@@ -143,6 +144,10 @@ class GaussiansArtifact(Artifact):
     solid_spacing: Annotated[Array, _f("/objects/solid/spacing", "f8", "O", nan=True)]
     loss: Annotated[Array, _f("/optimization/loss", "f4", "iterations,terms", nan=True)]  # NaN: not evaluated
     loss_terms: Annotated[List[str], _f("/optimization/loss@terms")]
+
+    def solids(self) -> list:
+        """Per object its solid (schemas.solid.SolidGrid), None where it has none."""
+        return solids_of(self.solid_distance, self.solid_centre, self.solid_axes, self.solid_spacing)
 
 
 class TrajectoriesArtifact(Artifact):

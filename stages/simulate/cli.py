@@ -12,7 +12,6 @@ from schemas import InputError, config_hash, load_scene, resolve_device, run_mai
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, check_lineage, read_artifact, write_artifact
 from schemas.files import check_writable, refuse_overwriting
 from schemas.images import write_image
-from schemas.solid import solids_of
 
 from .constitutive import wave_speed
 from .setup_image import draw_setup
@@ -62,8 +61,7 @@ def simulate(args: argparse.Namespace) -> None:
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     sim = Simulation(scene.physics, [o.material for o in scene.objects], gaussians.means, gaussians.object_id,
                      pitch_deg=scene.camera.pitch_deg, silhouette=(gaussians.mask, gaussians.K),
-                     solids=solids_of(gaussians.solid_distance, gaussians.solid_centre, gaussians.solid_axes,
-                                      gaussians.solid_spacing),
+                     solids=gaussians.solids(),
                      scene_file=scene.file, device=device)
     write_image(setup, draw_setup(sim, gaussians.photo, gaussians.K))
     log.info("wrote %s", setup)

@@ -13,7 +13,7 @@ from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.program import InputError
 from schemas.scene import PhysicsConfig
-from schemas.solid import SolidGrid, gravity_axes, solids_of
+from schemas.solid import SolidGrid, gravity_axes
 from stages.reconstruct.cli import main as reconstruct
 from stages.reconstruct.closure import object_depths
 from testing.photographs import Box, Capsule, UprightCylinder, standing_axes, write_scene
@@ -23,18 +23,13 @@ from testing.particles import box_surface
 DENSITY = 1000.0  # the presets' default
 
 
-def solids(g: GaussiansArtifact) -> list:
-    """The per-object solids of a gaussians artifact."""
-    return solids_of(g.solid_distance, g.solid_centre, g.solid_axes, g.solid_spacing)
-
-
 def reconstructed_solid(shape, folder, width=128, pitch_deg=0.0, grid=48):
     """(Simulation, gaussians) of `shape` reconstructed from one photograph `width` px wide (4:3)."""
     scene = write_scene(folder, shape, width=width, height=width * 3 // 4, iterations=100, pitch_deg=pitch_deg)
     reconstruct(["--scene", str(scene), "--out", str(folder / "gaussians.h5"), "--device", "cpu"])
     g = read_artifact(folder / "gaussians.h5", GaussiansArtifact)
     sim = Simulation(PhysicsConfig(duration_s=0.01, grid=grid), [M.Rigid(density=DENSITY)], g.means, g.object_id,
-                     pitch_deg=pitch_deg, solids=solids(g))
+                     pitch_deg=pitch_deg, solids=g.solids())
     return sim, g
 
 

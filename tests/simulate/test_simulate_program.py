@@ -18,6 +18,7 @@ from schemas import InputError
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact, read_artifact, write_artifact
 from schemas.scene import PhysicsConfig, SphereRegion
+from schemas.solid import solid_fields
 from stages.simulate import cli, domain
 from stages.simulate.conditions import region_members
 from stages.simulate.fill import carry_volume, fill_object, silhouette_gap
@@ -155,7 +156,7 @@ def make_gaussians(path, means, object_id):
         means=means, scales=np.full((G, 3), 0.004), rotations=np.tile([1.0, 0, 0, 0], (G, 1)),
         opacities=np.ones(G), colors=np.full((G, 3), 0.5), object_id=object_id, photo=photo,
         mask=np.zeros((H, W)), background=photo, depth_prior=np.zeros((H, W)),
-        object_volumes=np.full(int(np.max(object_id)) + 1, np.nan), loss=np.zeros((0, 1)),
+        **solid_fields([None] * (int(np.max(object_id)) + 1)), loss=np.zeros((0, 1)),
         loss_terms=["l1"]), created_by="test", config_hash="0")
 
 

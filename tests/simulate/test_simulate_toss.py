@@ -28,7 +28,6 @@ import pytest
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.scene import PhysicsConfig
-from schemas.solid import solids_of
 from stages.reconstruct.cli import main as reconstruct
 from testing.photographs import Capsule, write_scene
 from stages.simulate.rest_state import turn_deg
@@ -58,8 +57,7 @@ def test_a_ball_tossed_straight_up_comes_down_where_it_went_up(ball, material, g
     physics = PhysicsConfig(duration_s=1.0, fps=24, grid=24, ground={"type": ground, "friction": 0.4},
                             conditions=[{"type": "impulse", "velocity": [0.0, -SPEED, 0.0]}])
     sim = Simulation(physics, [material], gaussians.means, gaussians.object_id, pitch_deg=pitch,
-                     solids=solids_of(gaussians.solid_distance, gaussians.solid_centre, gaussians.solid_axes,
-                                     gaussians.solid_spacing))
+                     solids=gaussians.solids())
     tr = sim.run()
     centre = (tr.masses @ tr.positions) / tr.masses.sum()
     along = (centre - centre[0]) @ sim.Q.T  # simulation frame: y up
