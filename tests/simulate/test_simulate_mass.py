@@ -13,12 +13,11 @@ from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact, read_artifact
 from schemas.program import InputError
 from schemas.scene import PhysicsConfig
-from schemas.solid import SolidGrid, gravity_axes
 from stages.reconstruct.cli import main as reconstruct
 from stages.reconstruct.closure import object_depths
 from testing.photographs import Box, Capsule, UprightCylinder, standing_axes, write_scene
 from stages.simulate.simulation import Simulation, mass_properties
-from testing.particles import box_surface
+from testing.particles import box_surface, sphere_solid
 
 DENSITY = 1000.0  # the presets' default
 
@@ -94,14 +93,6 @@ def test_a_reconstructed_body_of_revolution_is_filled_mirror_symmetrically(tmp_p
         key = lambda p: np.round(p / (0.01 * sim.spacing)).astype(np.int64)
         own = {tuple(k): w for k, w in zip(key(x), m)}
         assert all(abs(own.get(tuple(k), -1.0) - w) <= 1e-6 * w for k, w in zip(key(mirrored), m))
-
-
-def sphere_solid(centre: np.ndarray, radius: float, nodes: int = 48) -> SolidGrid:
-    """The signed distance of a ball (centre (3,) m, radius m) on a grid aligned with default gravity."""
-    spacing = 2.4 * radius / (nodes - 1)
-    axes = gravity_axes(np.array([0.0, 1.0, 0.0]))
-    ijk = np.stack(np.meshgrid(*[np.arange(nodes)] * 3, indexing="ij"), axis=-1) - 0.5 * (nodes - 1)
-    return SolidGrid(np.linalg.norm(ijk * spacing, axis=-1) - radius, centre, axes, spacing)
 
 
 def test_the_body_is_its_solid_and_its_gaussians_ride_on_it(device):
