@@ -69,7 +69,7 @@ def simulate(physics, materials, gaussians, pitch_deg: float, scene_file, device
     """The row's measured cells (particles .. s per video second) of one simulation, and the Simulation."""
     start = time.perf_counter()
     sim = Simulation(physics, materials, gaussians.means, gaussians.object_id, pitch_deg=pitch_deg,
-                     silhouette=(gaussians.mask, gaussians.K), prior_volumes=gaussians.object_volumes,
+                     silhouette=(gaussians.mask, gaussians.K), solids=gaussians.solids(),
                      scene_file=scene_file, device=device)
     built = time.perf_counter()
     tr = sim.run()

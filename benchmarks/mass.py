@@ -5,8 +5,8 @@
 
 Each shape (a 12 cm ball 0.6 m away, a 20 cm ball 0.35 m away, the 25 cm capsule tilted 20 degrees, a
 14 x 9 x 9 cm box seen face on) is ray-cast by testing/photographs.py at each photograph width,
-reconstructed by pm-reconstruct and filled as pm-simulate fills it (grown to the photograph's silhouette,
-its particles carrying the volume its depth prior encloses). Printed: the solid's volume and its principal moments of inertia
+reconstructed by pm-reconstruct and filled as pm-simulate fills it (the lattice in the solid the
+reconstruction passes on). Printed: the solid's volume and its principal moments of inertia
 (density 1000) over the analytic ones and the particle count.
 
 --off-axis: the depth prior's own volume (no optimisation) of balls of radius 3-12 cm, 0.5-1.5 m away,
@@ -80,7 +80,7 @@ def main() -> None:
                 reconstruct(["--scene", str(scene), "--out", f"{tmp}/g.h5", "--device", "cpu"])
                 g = read_artifact(f"{tmp}/g.h5", GaussiansArtifact)
             sim = Simulation(PhysicsConfig(duration_s=0.01, grid=48), [M.Rigid(density=RHO)], g.means, g.object_id,
-                             silhouette=(g.mask, g.K), prior_volumes=g.object_volumes)
+                             silhouette=(g.mask, g.K), solids=g.solids())
             _, moments_sim = mass_properties(sim.masses, sim.rest_world)
             ratios = moments_sim / moments
             rows.append([name, f"{width} x {width * 3 // 4}", len(sim.masses), f"{sim.volumes.sum() / volume:.3f}",

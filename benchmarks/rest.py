@@ -82,7 +82,7 @@ def main() -> None:
             materials, label = preset_materials(scene, preset)
             start = time.perf_counter()
             sim = Simulation(physics, materials, g.means, g.object_id, pitch_deg=scene.camera.pitch_deg,
-                             silhouette=(g.mask, g.K), prior_volumes=g.object_volumes, scene_file=scene.file)
+                             silhouette=(g.mask, g.K), solids=g.solids(), scene_file=scene.file)
             tr = sim.run()
             r = drift(sim, tr)
             rows.append([folder.name, label, f"{r['turn']:.2f}", f"{1e3 * r['travel']:.2f}",

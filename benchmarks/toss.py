@@ -49,7 +49,7 @@ def toss(scene, gaussians, materials, ground: str, speed: float, duration: float
         update["duration_s"] = duration
     physics = physics.model_copy(update=update)
     sim = Simulation(physics, materials, gaussians.means, gaussians.object_id, pitch_deg=scene.camera.pitch_deg,
-                     silhouette=(gaussians.mask, gaussians.K), prior_volumes=gaussians.object_volumes,
+                     silhouette=(gaussians.mask, gaussians.K), solids=gaussians.solids(),
                      scene_file=scene.file)
     return sim, sim.run()
 

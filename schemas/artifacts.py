@@ -26,6 +26,7 @@ from pydantic import BaseModel, ConfigDict, model_validator
 
 from .files import write_file
 from .program import InputError
+from .solid import solids_of
 
 
 @dataclass(frozen=True)
@@ -116,7 +117,7 @@ class GaussiansArtifact(Artifact):
     """gaussians.h5, written by pm-reconstruct. G Gaussians; photo H x W."""
 
     SCHEMA: ClassVar[str] = "physmotion.gaussians"
-    VERSION: ClassVar[int] = 2
+    VERSION: ClassVar[int] = 3
     NONEMPTY: ClassVar[tuple] = ("G", "H", "W")
 
     K: Annotated[Array, _f("/camera/K", "f8", "3,3")]
@@ -133,11 +134,20 @@ class GaussiansArtifact(Artifact):
     mask: Annotated[Array, _f("/image/mask", "u1", "H,W", gzip=True)]
     background: Annotated[Array, _f("/image/background", "u1", "H,W,3", gzip=True)]
     depth_prior: Annotated[Array, _f("/image/depth_prior", "f4", "H,W", gzip=True, nan=True)]  # NaN off objects
-    # m^3 each object's depth prior encloses, the volume its simulated particles carry; NaN: an init_ply's
-    # object, whose solid is its own shape
-    object_volumes: Annotated[Array, _f("/objects/volume", "f8", "O", nan=True)]
+    # Each object's solid (schemas/solid.py, SolidGrid), the body pm-simulate fills; NaN for an object without
+    # one (init_ply, reconstruct.prior lgm), whose solid is its Gaussians'. distance: signed distance in m,
+    # negative inside, at N^3 nodes; centre: the middle node, world frame, m; axes: rows the grid's directions
+    # in the world frame (x horizontal, y against gravity, z = x cross y); spacing: m between nodes.
+    solid_distance: Annotated[Array, _f("/objects/solid/distance", "f4", "O,N,N,N", gzip=True, nan=True)]
+    solid_centre: Annotated[Array, _f("/objects/solid/centre", "f8", "O,3", nan=True)]
+    solid_axes: Annotated[Array, _f("/objects/solid/axes", "f8", "O,3,3", nan=True)]
+    solid_spacing: Annotated[Array, _f("/objects/solid/spacing", "f8", "O", nan=True)]
     loss: Annotated[Array, _f("/optimization/loss", "f4", "iterations,terms", nan=True)]  # NaN: not evaluated
     loss_terms: Annotated[List[str], _f("/optimization/loss@terms")]
+
+    def solids(self) -> list:
+        """Per object its solid (schemas.solid.SolidGrid), None where it has none."""
+        return solids_of(self.solid_distance, self.solid_centre, self.solid_axes, self.solid_spacing)
 
 
 class TrajectoriesArtifact(Artifact):

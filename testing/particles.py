@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from schemas.solid import SolidGrid, gravity_axes
+
 
 def box_surface(lo, hi, spacing: float) -> np.ndarray:
     """Points (N,3) on the six faces of the axis-aligned box [lo, hi] (m), about `spacing` apart."""
@@ -38,3 +40,12 @@ def sphere_surfels(n: int, radius: float) -> tuple[np.ndarray, np.ndarray, np.nd
     rotations = np.stack([1 + normals[:, 2], -normals[:, 1], normals[:, 0], np.zeros(n)], 1)
     rotations /= np.linalg.norm(rotations, axis=1, keepdims=True)
     return normals, np.tile([0.6 * spacing, 0.6 * spacing, 0.05 * spacing], (n, 1)), rotations
+
+
+def sphere_solid(centre: np.ndarray, radius: float, nodes: int = 48) -> SolidGrid:
+    """The signed distance of a ball (centre (3,) m, radius m) on a grid aligned with default gravity, as
+    pm-reconstruct passes a solid on."""
+    spacing = 2.4 * radius / (nodes - 1)
+    axes = gravity_axes(np.array([0.0, 1.0, 0.0]))
+    ijk = np.stack(np.meshgrid(*[np.arange(nodes)] * 3, indexing="ij"), axis=-1) - 0.5 * (nodes - 1)
+    return SolidGrid(np.linalg.norm(ijk * spacing, axis=-1) - radius, np.asarray(centre, float), axes, spacing)

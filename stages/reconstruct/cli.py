@@ -14,6 +14,7 @@ import torch
 from schemas import InputError, config_hash, load_scene, resolve_device, run_main, stage_keys, stage_parser
 from schemas.artifacts import GaussiansArtifact, file_digest, write_artifact
 from schemas.files import check_writable, refuse_overwriting
+from schemas.solid import solid_fields
 
 from .optimize import LOSS_TERMS
 from .pipeline import optimize_scene, prepare
@@ -118,7 +119,7 @@ def reconstruct(args: argparse.Namespace) -> None:
         means=gaussians.means, scales=gaussians.scales, rotations=gaussians.rotations,
         opacities=gaussians.opacities, colors=gaussians.colors, object_id=gaussians.object_id,
         photo=prepared.photo, mask=prepared.labels, background=prepared.background,
-        depth_prior=prepared.depth_prior, object_volumes=prepared.volumes, loss=loss, loss_terms=LOSS_TERMS)
+        depth_prior=prepared.depth_prior, **solid_fields(prepared.solids), loss=loss, loss_terms=LOSS_TERMS)
     write_artifact(args.out, artifact, created_by="pm-reconstruct",
                    config_hash=config_hash(stage_keys(scene, "reconstruct")),
                    inputs={"files": {key: file_digest(path) for key, path in sources.items()}, "stages": {}})

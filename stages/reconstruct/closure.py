@@ -31,8 +31,9 @@ from scipy.spatial import ConvexHull, QhullError
 
 from schemas.camera import pixel_rays
 
+from .body import Balls, Body, Standing
 from .depth import ObjectDepth, aligned_front, medial_balls
-from .standing import NEAR_PX, StandingSolid, standing_solid
+from .standing import NEAR_PX, GravityView, StandingSolid, standing_solid
 
 log = logging.getLogger("physmotion.reconstruct")
 
@@ -218,7 +219,7 @@ def ray_union(rays: np.ndarray, centres: np.ndarray, radii: np.ndarray, own: np.
 
 
 def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float,
-                through: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray]:
+                through: Optional[np.ndarray] = None) -> tuple[np.ndarray, np.ndarray, Balls]:
     """Front and back camera z (N,) m along the rays of the pixels of `mask` (H,W) bool (row-major), of the
     body swept by the medial balls of the silhouette as seen facing the object (gravity along `down` (3,)
     in the camera frame), their centres on the vertical plane across the view at the distance that makes
@@ -230,7 +231,7 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
     silhouette meets the body (a radius of D R_px / f misses the outer rays by the perspective: a
     0.2 m ball 0.47 m away loses 9 % of its volume). Facing the object, a ball's silhouette is a circle
     (off the optical axis the picture stretches it into an ellipse, whose medial axis is a segment). Each
-    ray's front and back are where it enters and leaves the union of the balls."""
+    ray's front and back are where it enters and leaves the union of the balls, which is returned too."""
     view = FacingView.of(mask, K, down)
     radius, _, axis = medial_balls(view.mask)
     radius, axis_r, axis_c = sparse_axis(view.mask, radius, axis)
@@ -256,17 +257,20 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
     centres, radii = balls(*axis_points.T)
     facing = np.zeros(view.mask.shape, int)
     facing[view.mask] = own.ravel()
-    return ray_union(input_rays(mask, K), scale * centres, scale * radii, facing[view.pixels_of(mask)])
+    t_in, t_out = ray_union(input_rays(mask, K), scale * centres, scale * radii, facing[view.pixels_of(mask)])
+    return t_in, t_out, Balls(scale * centres, scale * radii)
 
 
 def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float,
-                 solid: StandingSolid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 solid: StandingSolid) -> tuple[np.ndarray, np.ndarray, np.ndarray, list]:
     """Front and back camera z (N,) m along the rays of the pixels of `mask` (H,W) bool (row-major) of the
     standing solid (standing.standing_solid) whose largest extent is size_m, and (N,) bool: those whose
     front lies on its base. A pixel whose ray grazes by it (within standing.NEAR_PX of its image) lies on
     the surface of the nearest pixel it holds, with no thickness; the rest (a handle) keep their own medial
-    balls, on the vertical plane through the solid's middle where they meet it."""
+    balls, on the vertical plane through the solid's middle where they meet it. The fourth value: the body's
+    parts (body.Standing, and the handle's body.Balls)."""
     scale = size_m / solid.solid.extent
+    parts = [Standing(solid.solid, GravityView.of(mask, K, down).R, scale)]
     t_in, t_out = scale * solid.t_in, scale * solid.t_out
     held = np.zeros(mask.shape, bool)
     held[mask] = np.isfinite(t_in)
@@ -281,8 +285,9 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
         if not meets.any():
             meets = held
         points = input_rays(meets, K) * mid[meets][:, None]
-        t_in[handle[mask]], t_out[handle[mask]] = ball_depths(handle, K, down, size_m, points.mean(0))
-    return t_in, t_out, solid.on_base
+        t_in[handle[mask]], t_out[handle[mask]], balls = ball_depths(handle, K, down, size_m, points.mean(0))
+        parts.append(balls)
+    return t_in, t_out, solid.on_base, parts
 
 
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
@@ -295,7 +300,7 @@ def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np
     STAND_TILT_DEG (inside by tan of it times the centre's height), as a thing made to stand does, else by
     the lowest on which it stands at all; at most MAX_CUT of its height and MAX_CUT_VOLUME of its volume.
     A body that needs more does not stand as photographed, and is left whole to fall. Returns the clipped
-    (t_in, t_out) and the cut (m above the lowest point)."""
+    (t_in, t_out), the cut (m above the lowest point) and the lowest point's height, -(x . down) m."""
     across = np.cross(down, [0.0, 0.0, 1.0]) if abs(down[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
     across /= np.linalg.norm(across)
     along = np.cross(down, across)
@@ -340,7 +345,7 @@ def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np
         return high
 
     if held(0.0)[0] >= margin:
-        return t_in, t_out, 0.0
+        return t_in, t_out, 0.0, lowest
     tilt = math.tan(math.radians(STAND_TILT_DEG))
     for stands in (lambda c: (lambda inside, h: inside >= max(margin, tilt * h))(*held(c)),
                    lambda c: held(c)[0] >= margin):
@@ -348,8 +353,8 @@ def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np
         if cut is not None:
             start, end = cut_at(cut)
             if float(np.sum(end ** 3 - start ** 3)) >= (1.0 - MAX_CUT_VOLUME) * whole:
-                return start, end, cut
-    return t_in, t_out, 0.0  # a carve, not a base: a capsule leaning 20 degrees would lose 7 %
+                return start, end, cut, lowest
+    return t_in, t_out, 0.0, lowest  # a carve, not a base: a capsule leaning 20 degrees would lose 7 %
 
 
 def support_margin(points: np.ndarray, centre: np.ndarray) -> float:
@@ -368,8 +373,8 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
                   inverse_depth: Optional[np.ndarray] = None) -> list[ObjectDepth]:
     """Metric front and back camera z (H,W) of each object (labels k + 1), NaN off it: its standing solid
     (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], cut
-    flat where it stands on the ground (standing_cut). With ``inverse_depth`` (a depth model's, (H,W))
-    the front follows the model, aligned to the body's front."""
+    flat where it stands on the ground (standing_cut); and that body itself (ObjectDepth.body). With
+    ``inverse_depth`` (a depth model's, (H,W)) the front follows the model, aligned to the body's front."""
     down = down_direction(pitch_deg)
     out = []
     for k, size in enumerate(sizes_m):
@@ -377,20 +382,20 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
         front, back = np.full(mask.shape, np.nan), np.full(mask.shape, np.nan)
         solid = standing_solid(mask, K, down)
         if solid is None:
-            t_in, t_out = ball_depths(mask, K, down, size)
-            on_solid_base = np.zeros(len(t_in), bool)
+            t_in, t_out, balls = ball_depths(mask, K, down, size)
+            on_solid_base, parts = np.zeros(len(t_in), bool), [balls]
         else:
-            t_in, t_out, on_solid_base = solid_depths(mask, K, down, size, solid)
+            t_in, t_out, on_solid_base, parts = solid_depths(mask, K, down, size, solid)
             log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k, solid.solid.kind,
                      solid.overlap)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
         layer = max(BASE_LAYER * size, 1.5 * float(np.median(t_in)) / K[0, 0])
-        front[mask], back[mask], cut = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,
+        front[mask], back[mask], cut, lowest = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,
                                                     layer)
         base = np.zeros(mask.shape, bool)
         base[mask] = (front[mask] != t_in) | (back[mask] != t_out) | on_solid_base
         if cut > 0:
             log.info("object %d: cut flat %.1f mm above its lowest point, where it stands on its base", k, 1e3 * cut)
-        depth = ObjectDepth(front, back, base)
+        depth = ObjectDepth(front, back, base, Body(parts, down, lowest + cut))
         out.append(depth if inverse_depth is None else aligned_front(depth, inverse_depth))
     return out

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 import cv2
 import numpy as np
@@ -81,11 +81,13 @@ def inflation_half_thickness(mask: np.ndarray) -> np.ndarray:
 @dataclass
 class ObjectDepth:
     """Camera-space depths (H,W) in metres of one object's front and back surface, NaN off the object; base
-    (H,W) bool: the pixels whose front lies on the flat base the body stands on (closure.standing_cut)."""
+    (H,W) bool: the pixels whose front lies on the flat base the body stands on (closure.standing_cut); body:
+    the solid itself (body.Body), None where the depths are all that is known."""
 
     front: np.ndarray
     back: np.ndarray
     base: Optional[np.ndarray] = None
+    body: Optional[Any] = None
 
     @property
     def pixels(self) -> np.ndarray:
@@ -178,7 +180,7 @@ def aligned_front(depth: ObjectDepth, inverse_depth: np.ndarray) -> ObjectDepth:
     (scale, shift), *_ = np.linalg.lstsq(design, 1.0 / depth.front[mask], rcond=None)
     floor = 1.0 / np.nanmax(depth.back)  # never behind the prior's back
     front = np.where(mask, 1.0 / np.maximum(scale * inverse_depth + shift, floor), np.nan)
-    return ObjectDepth(front, front + (depth.back - depth.front), depth.base)
+    return ObjectDepth(front, front + (depth.back - depth.front), depth.base, depth.body)
 
 
 def depth_prior_image(depths: Sequence[ObjectDepth], K: np.ndarray) -> np.ndarray:

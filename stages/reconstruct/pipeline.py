@@ -10,10 +10,13 @@ import cv2
 import numpy as np
 
 from schemas import InputError, Scene
+from schemas.camera import pixel_rays
+from schemas.solid import SolidGrid
 
 from splat.project import NEAR_PLANE
 
 from .background import inpaint_background
+from .body import sample
 from .closure import object_depths
 from .depth import DptDepth, ObjectDepth, depth_prior_image
 from .geometry import intrinsics_from_fov, working_size
@@ -53,7 +56,7 @@ class Prepared:
     depth_prior: np.ndarray    # f32 (H,W) metres along the ray, NaN off objects
     initial: Gaussians
     seen: np.ndarray           # (G,) bool: the initial Gaussians on surfaces the photograph sees
-    volumes: np.ndarray        # (objects,) m^3 the depth prior (or prior lgm's Gaussians) encloses; NaN for an init_ply
+    solids: list[Optional[SolidGrid]]  # per object the body the closure took; None for an init_ply's or prior lgm's
 
 
 def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -> np.ndarray:
@@ -66,7 +69,7 @@ def downsample(image: np.ndarray, size: tuple[int, int], labels: bool = False) -
 def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
             depth_model: Optional[Path] = None, learned: Optional["LearnedPrior"] = None) -> Prepared:
     """Segment, inpaint, estimate depth and lift the initial Gaussians of ``scene``; with reconstruct.prior lgm
-    the initial Gaussians and the volumes are ``learned``'s (lgm/prior.py)."""
+    the initial Gaussians are ``learned``'s (lgm/prior.py), and their body is theirs (no solid)."""
     photo, alpha = read_photo(scene.image)
     full_height, full_width = photo.shape[:2]
     size = working_size(full_width, full_height, MAX_PHOTO_PX)
@@ -105,16 +108,31 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
     if scene.reconstruct.prior == "lgm":
         from .lgm.prior import learned_objects
 
-        initial, seen, volumes = learned_objects(learned, scene.file, photo, labels, [d.front for d in depths], K,
+        initial, seen, _ = learned_objects(learned, scene.file, photo, labels, [d.front for d in depths], K,
                                                  [o.size_m for o in scene.objects], MAX_GAUSSIANS)
     else:
         initial, seen = initial_gaussians(scene, photo, labels, depths, K)
-        volumes = np.array([np.nan if scene.reconstruct.init_ply is not None else d.volume(K) for d in depths])
-        for k, volume in enumerate(volumes):
-            if np.isfinite(volume):
-                log.info("object %d: the depth prior encloses %.4g m^3", k, volume)
+    solids = [None if scene.reconstruct.prior == "lgm" or scene.reconstruct.init_ply is not None else
+              object_solid(d, K, k) for k, d in enumerate(depths)]
     return Prepared(photo, labels, background, K, depths, depth_prior_image(depths, K), initial, seen,
-                    volumes)
+                    solids)
+
+
+def object_solid(depth: ObjectDepth, K: np.ndarray, k: int) -> Optional[SolidGrid]:
+    """The body the closure took for object k (depth.body), on its grid (body.sample), its front and back
+    (H,W) spanning it; None without one."""
+    if depth.body is None:
+        return None
+    pixels = depth.pixels
+    rays = pixel_rays(K, *pixels.shape)[pixels]
+    rays = rays / rays[:, 2:3]
+    points = np.concatenate([rays * depth.front[pixels][:, None], rays * depth.back[pixels][:, None]])
+    solid = sample(depth.body, points)
+    if solid is not None:
+        inside = np.clip(0.5 - solid.distance.astype(np.float64) / solid.spacing, 0.0, 1.0)
+        log.info("object %d: its solid holds %.4g m^3 (%d^3 nodes of %.2f mm; its depths enclose %.4g m^3)", k,
+                 inside.sum() * solid.spacing ** 3, solid.distance.shape[0], 1e3 * solid.spacing, depth.volume(K))
+    return solid
 
 
 def view_span_deg(mask: np.ndarray, K: np.ndarray) -> float:

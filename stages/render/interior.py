@@ -143,11 +143,11 @@ def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarr
     sqrt(2 ln 2) spacing (so neighbours overlap and a heap is opaque) and s the grain's size, uniform
     over GRAIN_SIZES scaled so that the mean of s^2 is 1 (the grains cover the area the lattice's
     would), its long axis GRAIN_ELONGATION times its two short ones, turned at random (seeded: the
-    same for every run). A grain's size does not follow the volume its particle carries: a surface
-    Gaussian on a side wall carries the volume the closed body lacks (stages/simulate/fill.py) and
-    would grow into a disc many grains wide.
+    same for every run). A grain's size does not follow the volume its particle carries: a cell the
+    surface cuts carries a sliver of it, and a surface Gaussian none (stages/simulate/fill.py).
     Of the other materials, a round soft grain of the particle's own opacity and standard deviation
-    GRAIN_SIGMA V^(1/3): a torn face reads as solid material, not as grains.
+    GRAIN_SIGMA V^(1/3), V its volume or, for a massless surface Gaussian, its lattice cell's: a torn
+    face reads as solid material, not as grains.
 
     Args:
         volumes: (P,) m^3; spacing: (P,) each particle's lattice spacing, m (lattice_spacing; finite
@@ -166,7 +166,8 @@ def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarr
     axes = GRAIN_ELONGATION ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
     turns = Rotation.random(len(volumes), random_state=0).as_matrix()
     hard = np.einsum("pij,j,pkj->pik", turns, axes ** 2, turns) * hard_sigma[:, None, None] ** 2
-    soft = np.eye(3) * (GRAIN_SIGMA * np.cbrt(volumes))[:, None, None] ** 2
+    own = np.where(volumes > 0, volumes, np.where(np.isfinite(spacing), spacing, 0.0) ** 3)
+    soft = np.eye(3) * (GRAIN_SIGMA * np.cbrt(own))[:, None, None] ** 2
     return np.where(granular[:, None, None], hard, soft), opacity
 
 

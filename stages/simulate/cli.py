@@ -61,7 +61,7 @@ def simulate(args: argparse.Namespace) -> None:
     gaussians = read_artifact(args.gaussians, GaussiansArtifact)
     sim = Simulation(scene.physics, [o.material for o in scene.objects], gaussians.means, gaussians.object_id,
                      pitch_deg=scene.camera.pitch_deg, silhouette=(gaussians.mask, gaussians.K),
-                     prior_volumes=gaussians.object_volumes,
+                     solids=gaussians.solids(),
                      scene_file=scene.file, device=device)
     write_image(setup, draw_setup(sim, gaussians.photo, gaussians.K))
     log.info("wrote %s", setup)

@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from schemas.solid import gravity_axes
+
 from .constitutive import wave_speed
 from .mpm import BOUNDARY_NODES, Grid
 
@@ -37,17 +39,9 @@ def world_gravity(gravity: tuple | None, pitch_deg: float) -> np.ndarray:
 
 
 def simulation_rotation(down: np.ndarray) -> np.ndarray:
-    """Rotation Q (3,3), x_sim = Q x_world, taking the unit `down` direction to -y_sim.
-
-    Rows: sim x = world x made orthogonal to up (so the picture's x stays x),
-    sim y = up, sim z = x cross y (right-handed).
-    """
-    up = -down / np.linalg.norm(down)
-    x = np.array([1.0, 0.0, 0.0]) - up[0] * up
-    if np.linalg.norm(x) < 1e-6:  # gravity along the picture's x axis
-        x = np.array([0.0, 0.0, 1.0]) - up[2] * up
-    x /= np.linalg.norm(x)
-    return np.stack([x, up, np.cross(x, up)])
+    """Rotation Q (3,3), x_sim = Q x_world, taking the unit `down` direction to -y_sim: the axes the
+    reconstruction's solids are sampled along (schemas.solid.gravity_axes)."""
+    return gravity_axes(down)
 
 
 def down_direction(gravity_world: np.ndarray, pitch_deg: float) -> np.ndarray:

@@ -222,6 +222,10 @@ def grid_update_kernel(n_fields: int) -> wp.Kernel:
                 v = v1
             if substep.keep_unsupported != 0:
                 grid.unsupported_velocity[field, i, j, k] = v
+            if field == 0:
+                grid.mass[field, i, j, k] = total0[3]
+            else:
+                grid.mass[field, i, j, k] = total1[3]
             if substep.ground_kind != GROUND_NONE and j <= grid.ground_node:
                 v = ground_contact(v, substep.ground_kind, substep.friction)
             grid.velocity[field, i, j, k] = v
@@ -257,7 +261,9 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         closed (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall
         layer. Particles of bodies that meet the ground themselves (own_ground, rigid) gather the
         velocity before the ground's contact law. With two fields each node is read in the particle's
-        own field there (cracks.field_bits, written by P2G).
+        own field there (cracks.field_bits, written by P2G). A massless particle (a Gaussian riding on
+        its body's solid) gathers with the weights times the nodes' masses, normalised: it moves with the
+        material about it, not with the empty nodes beyond its body's surface.
         """
         p = wp.tid() + start
         if particles.free[p] != 0:
@@ -280,31 +286,49 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
         # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
         # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
+        massless = particles.mass[p] <= 0.0
         vp = wp.vec3(0.0)
         Bx = wp.vec3(0.0)
         By = wp.vec3(0.0)
         Bz = wp.vec3(0.0)
+        weight = float(0.0)  # sum of w m over the stencil, for a massless particle
         for i in range(3):
             v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
             vy_i = wp.vec3(0.0)  # ... of oy wz v
             vz_i = wp.vec3(0.0)  # ... of wy oz v
+            m_i = float(0.0)  # ... of wy wz m
             for j in range(3):
                 v_ij = wp.vec3(0.0)  # sum over k of wz v
                 vz_ij = wp.vec3(0.0)  # ... of oz v
+                m_ij = float(0.0)  # ... of wz m
                 for k in range(3):
                     field = int(0)
                     if wp.static(n_fields == 2):
                         field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
                     vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
+                    if massless:
+                        mi = grid.mass[field, base[0] + i, base[1] + j, base[2] + k]
+                        vi = mi * vi
+                        m_ij += wz[k] * mi
                     v_ij += wz[k] * vi
                     vz_ij += oz[k] * vi
                 v_i += wy[j] * v_ij
                 vy_i += oy[j] * v_ij
                 vz_i += wy[j] * vz_ij
+                m_i += wy[j] * m_ij
             vp += wx[i] * v_i
             Bx += ox[i] * v_i
             By += wx[i] * vy_i
             Bz += wx[i] * vz_i
+            weight += wx[i] * m_i
+        if massless:
+            if weight > 0.0:
+                vp = vp / weight
+                Bx = Bx / weight
+                By = By / weight
+                Bz = Bz / weight
+            else:  # no material about it: it keeps its velocity
+                vp = particles.v[p]
         Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
         if particles.prescribed[p] != 0:
             vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid
@@ -339,7 +363,9 @@ def free_flight(start: int, substep: Step, grid: GridNodes, particles: Particles
     if particles.free[p] != 1:
         return
     dt = substep.dt
-    vp = particles.v[p] + dt * (substep.gravity + particles.force[p] / particles.mass[p])
+    vp = particles.v[p] + dt * substep.gravity
+    if particles.mass[p] > 0.0:
+        vp += dt * particles.force[p] / particles.mass[p]
     if particles.prescribed[p] != 0:
         vp = particles.prescribed_velocity[p]
     xp = particles.x[p] + dt * vp
@@ -415,6 +441,7 @@ class MPMSolver:
         self.nodes.n_parts = self.n_parts
         self.nodes.momentum_mass = wp.zeros((self.n_parts * self.n_fields, nx, ny, nz), dtype=wp.vec4, device=device)
         self.nodes.velocity = wp.zeros((self.n_fields, nx, ny, nz), dtype=wp.vec3, device=device)
+        self.nodes.mass = wp.zeros((self.n_fields, nx, ny, nz), dtype=float, device=device)
         self.nodes.unsupported_velocity = self.nodes.velocity  # its own array once rigid bodies are attached
         self.step = Step()
         self.step.gravity = self.gravity

@@ -120,6 +120,8 @@ def gather_rigid_momentum(step: RigidStep, members: Members, bodies: Bodies, par
     p = members.particle[i]
     b = members.body[i]
     m = particles.mass[p]
+    if m <= 0.0:
+        return  # a Gaussian riding on the body: no momentum, and not what meets the ground
     momentum = m * particles.v[p]
     offset = wp.quat_rotate(bodies.orientation[b], members.rest_offset[i])
     turning = wp.cross(offset, momentum)

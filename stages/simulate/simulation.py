@@ -27,7 +27,7 @@ from schemas.materials import PRESETS
 from . import domain, rest_state
 from .conditions import Conditions, inertia_about_centre, largest_acceleration
 from .constitutive import elastic_energy, wave_speed
-from .fill import carry_volume, fill_object, lattice_spacing, silhouette_gap
+from .fill import fill_object, fill_solid, lattice_spacing
 from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
 from .quasi_static import RELAXED, QuasiStatic
 from .rigid import RigidBodies
@@ -46,9 +46,6 @@ QUIET_CELLS = 0.05
 SETTLE_LOG_EVERY_S = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
 FOLLOW_MARGIN_CELLS = 2
-# An object's solid and its depth prior's body differ by 2-26 % on the examples and photographs measured
-# (the closure's perspective, thin parts); a solid more than this factor off has a leak or a fold, and is named.
-SOLID_SHARE_WARN = 1.5
 
 
 def mass_properties(masses: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -68,15 +65,16 @@ class Simulation:
         object_id: (G,) object index k of each Gaussian.
         pitch_deg: camera.pitch_deg, turns the default gravity.
         silhouette: (mask (H,W) u8 with k + 1 for object k, K (3,3)) of the photograph, world = its camera
-            frame: each object's solid grows to the mask's area (fill.silhouette_gap); None: the means'.
-        prior_volumes: (objects,) m^3 each object's body as its depth prior lifted it (gaussians.h5's
-            /objects/volume), which its particles carry, all scaled alike; NaN or None: the solid's own.
+            frame: the particles that leave its view are named; None: none are.
+        solids: per object its solid (schemas.solid.SolidGrid, gaussians.h5's /objects/solid), which its
+            particles fill, the Gaussians riding on it without mass; None (for all or one object): the
+            solid the Gaussians' means enclose (fill.fill_object), which they share.
         scene_file: named in error messages.
         device: Warp device ("cpu", "cuda:0").
     """
 
     def __init__(self, physics, materials: list, means: np.ndarray, object_id: np.ndarray, *,
-                 pitch_deg: float = 0.0, silhouette: tuple | None = None, prior_volumes: np.ndarray | None = None,
+                 pitch_deg: float = 0.0, silhouette: tuple | None = None, solids: list | None = None,
                  scene_file: Path | str = "scene.yaml", device: str = "cpu"):
         self.physics, self.materials, self.scene_file, self.device = physics, list(materials), scene_file, device
         means = np.asarray(means, np.float64)
@@ -84,8 +82,8 @@ class Simulation:
         if object_id.min(initial=0) < 0 or object_id.max(initial=0) >= len(self.materials):
             raise InputError(scene_file, "objects", f"the Gaussians name objects up to {object_id.max()} but the "
                              f"scene lists {len(self.materials)}", "rerun pm-reconstruct with this scene")
-        if prior_volumes is not None and len(prior_volumes) != len(self.materials):
-            raise InputError(scene_file, "objects", f"the reconstruction gives the volumes of {len(prior_volumes)} "
+        if solids is not None and len(solids) != len(self.materials):
+            raise InputError(scene_file, "objects", f"the reconstruction gives the solids of {len(solids)} "
                              f"object(s) but the scene lists {len(self.materials)}", "rerun pm-reconstruct with this scene")
         for k in range(len(self.materials)):
             if not np.any(object_id == k):
@@ -104,7 +102,7 @@ class Simulation:
         means_sim = means @ self.Q.T
         dx = domain.cell_size(means_sim, physics.grid, ground=ground.enabled, walls=physics.walls)
         self.spacing = spacing = lattice_spacing(dx, physics.particles_per_cell)
-        fills, gauss_volume = self._fill_objects(means, means_sim, object_id, dx, silhouette, prior_volumes)
+        fills, gauss_volume = self._fill_objects(means_sim, object_id, dx, solids or [None] * len(self.materials))
         self.rest_world = np.concatenate([means] + [f for f, _, _ in fills])
         self.volumes = np.concatenate([gauss_volume] + [v for _, v, _ in fills])
         self.object_id = np.concatenate([object_id] + [np.full(len(f), k) for f, _, k in fills])
@@ -115,8 +113,9 @@ class Simulation:
 
         self.rest_sim = rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
-        # the ground: the plane, normal to gravity, through the objects' lowest point; they stand on their base
-        self.ground_y = float(rest_sim[:, 1].min()) if ground.enabled else None
+        # the ground: the plane, normal to gravity, through the objects' lowest particle that carries mass;
+        # they stand on their base
+        self.ground_y = float(rest_sim[self.masses > 0, 1].min()) if ground.enabled else None
         largest = np.argmax(np.bincount(object_id))
         box = means_sim[object_id == largest]
         self.grid = domain.fit_grid(rest_sim, dx, ground_y=self.ground_y, walls=physics.walls,
@@ -147,50 +146,28 @@ class Simulation:
         self._log_bodies(rest_sim)
         self._check_budget()
 
-    def _fill_objects(self, means: np.ndarray, means_sim: np.ndarray, object_id: np.ndarray, dx: float,
-                      silhouette: tuple | None, prior_volumes: np.ndarray | None) -> tuple[list, np.ndarray]:
+    def _fill_objects(self, means_sim: np.ndarray, object_id: np.ndarray, dx: float, solids: list
+                      ) -> tuple[list, np.ndarray]:
         """Each object's interior: [(fill (N,3) world m, fill volumes (N,) m^3, object)], and the Gaussians'
-        volumes (G,) m^3; grown to the photograph's silhouette when it is given, and carrying the volume of
-        the depth prior's body where it is known.
-
-        The solid has the shape of the reconstruction's closed surface, whose back lies straight behind
-        its front (the body then stands as photographed, docs/ARCHITECTURE.md, "closing the back"). That
-        back keeps the front's scale across the view where the prior's rays spread: a ball of radius r
-        at distance z is about 0.75 r / z light so (the 12 cm test ball 0.6 m away 2-6 %, the example ball
-        15 %), while the prior's own body holds its volume to 3 %. What the solid lacks lies on its sides,
-        where the prior's body is wider, and the side walls' particles carry it (fill.carry_volume): the
-        mass is the prior's and sits as far out as the body's, so its moment of inertia follows (the 12 cm
-        ball at 192 px: 0.89 of a solid ball's without it, 0.94 with it). Mass and stress scale together on
-        each particle, so the material behaves as it did; an excess is taken from every particle alike.
-        means_sim: (G,3) the means in the simulation frame, m."""
+        volumes (G,) m^3. An object with a solid (schemas.solid.SolidGrid) fills it (fill.fill_solid) and its
+        Gaussians carry no volume; one without fills what its means enclose (fill.fill_object), its
+        Gaussians sharing the volume. means_sim: (G,3) the means in the simulation frame, m."""
         per_cell = self.physics.particles_per_cell
-        fills, gauss_volume = [], np.zeros(len(means))
+        fills, gauss_volume = [], np.zeros(len(means_sim))
         for k in range(len(self.materials)):
             sel = object_id == k
             # The fill lattice is laid in the simulation frame, its layers parallel to the ground: a
             # lattice along the camera's axes meets a pitched ground with a staircase that lands on
             # one side first and spins the body (tests/simulate: a sphere on slip ground).
-            skin = 0.0 if silhouette is None else silhouette_gap(means[sel], silhouette[0] == k + 1, silhouette[1])
-            view = self.Q @ means[sel].mean(axis=0)  # the camera sits at the world's origin
-            solid = fill_object(means_sim[sel], dx, per_cell, skin, view / np.linalg.norm(view))
-            if silhouette is not None:
-                log.info("object %d: solid grown by %.2f mm to the photograph's silhouette", k, 1e3 * skin)
-            volumes = solid.volume
-            if prior_volumes is not None and np.isfinite(prior_volumes[k]):
-                share = float(volumes.sum()) / float(prior_volumes[k])
-                if not 1.0 / SOLID_SHARE_WARN < share < SOLID_SHARE_WARN:
-                    log.warning("object %d: its solid holds %.2f of the volume its depth prior encloses, far "
-                                "from it: the reconstruction's surface may not be closed; look at setup.png",
-                                k, share)
-                carried = carry_volume(volumes, solid.sideways, float(prior_volumes[k]))
-                factor = carried / volumes
-                log.info("object %d: its solid holds %.3f of the %.4g m^3 its depth prior encloses; its "
-                         "particles carry the prior's, %.2f-%.2f times their own (a lack on the side walls, an "
-                         "excess from all alike)", k, share, prior_volumes[k], factor.min(), factor.max())
-                volumes = carried
-            gaussians = int(sel.sum())
-            gauss_volume[sel] = volumes[:gaussians]
-            fills.append((solid.fill @ self.Q, volumes[gaussians:], k))
+            if solids[k] is not None:
+                fill, volumes = fill_solid(solids[k], self.Q, lattice_spacing(dx, per_cell))
+                log.info("object %d: its solid filled by %d particles holding %.4g m^3", k, len(fill),
+                         volumes.sum())
+            else:
+                solid = fill_object(means_sim[sel], dx, per_cell)
+                gauss_volume[sel] = solid.volume[:int(sel.sum())]
+                fill, volumes = solid.fill, solid.volume[int(sel.sum()):]
+            fills.append((fill @ self.Q, volumes, k))
         return fills, gauss_volume
 
     def _check_budget(self) -> None:

@@ -43,6 +43,7 @@ class GridNodes:
     momentum_mass: wp.array4d(dtype=wp.vec4)  # (n_parts * fields, nx, ny, nz) P2G's (momentum kg m/s, mass kg)
     velocity: wp.array4d(dtype=wp.vec3)  # (fields, nx, ny, nz) m/s after the ground's contact law
     unsupported_velocity: wp.array4d(dtype=wp.vec3)  # (fields, nx, ny, nz) m/s before it (rigid bodies)
+    mass: wp.array4d(dtype=float)  # (fields, nx, ny, nz) kg, the grid update's (G2P of massless particles)
 
 
 @wp.struct

@@ -9,6 +9,7 @@ import torch
 import yaml
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, write_artifact
+from schemas.solid import solid_fields
 from testing.tiny_diffusion import save_tiny_models, tiny_components
 
 SIZE = 64  # coarse frames and photo: 64 x 64 px -> 8 x 8 latents
@@ -65,7 +66,7 @@ def write_inputs(folder: Path, enhance: dict) -> dict:
         rotations=np.array([[1, 0, 0, 0]], np.float32), opacities=np.ones(1, np.float32),
         colors=np.full((1, 3), 0.5, np.float32), object_id=np.zeros(1, np.int32), photo=photo,
         mask=(alpha0 > 0.5).astype(np.uint8), background=background,
-        depth_prior=np.full((SIZE, SIZE), np.nan, np.float32), object_volumes=np.full(1, np.nan), loss=np.zeros((0, 2), np.float32),
+        depth_prior=np.full((SIZE, SIZE), np.nan, np.float32), **solid_fields([None]), loss=np.zeros((0, 2), np.float32),
         loss_terms=["colour", "depth"])
     frames = [_disc(24 + 6 * j, 32, 12) for j in range(FRAMES)]
     alpha = np.stack([a for a, _ in frames])

@@ -102,7 +102,7 @@ def test_a_body_photographed_on_the_tip_of_its_handle_stands_on_a_base():
     depth = object_depths((body | handle).astype(np.uint8), K, [0.2], pitch)[0]
     mask = body | handle
     whole = ObjectDepth(np.full(mask.shape, np.nan), np.full(mask.shape, np.nan))  # as swept, before the cut
-    whole.front[mask], whole.back[mask] = ball_depths(mask, K, down_direction(pitch), 0.2)
+    whole.front[mask], whole.back[mask], _ = ball_depths(mask, K, down_direction(pitch), 0.2)
     assert depth.base.any()
     down = down_direction(pitch)
     across = np.array([1.0, 0.0, 0.0])

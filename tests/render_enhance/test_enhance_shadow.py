@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
+from schemas.solid import solid_fields
 from stages.enhance.flow import enhance_frames
 from stages.enhance.shadow import Ground
 from stages.reconstruct.background import inpaint_background
@@ -84,7 +85,7 @@ def surfel_ball(photo, coverage, n: int = 5000) -> GaussiansArtifact:
         scales=scales, rotations=quaternions,
         opacities=np.full(n, 0.95), colors=colours, object_id=np.zeros(n), photo=photo, mask=labels,
         background=inpaint_background(photo, labels), depth_prior=np.where(labels > 0, 1.0, np.nan),
-        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
+        **solid_fields([None]), loss=np.zeros((0, 1)), loss_terms=["none"])
 
 
 def slid(gaussians: GaussiansArtifact) -> TrajectoriesArtifact:

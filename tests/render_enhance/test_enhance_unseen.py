@@ -7,6 +7,7 @@ import pytest
 
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
 from schemas.camera import pixel_rays
+from schemas.solid import solid_fields
 from stages.enhance.flow import enhance_frames
 from stages.enhance.relight import to_srgb
 from stages.enhance.unseen import mirrored_source
@@ -58,7 +59,7 @@ def closed_ball(photo: np.ndarray, coverage: np.ndarray, n: int = 8000) -> Gauss
         scales=scales, rotations=quaternions,
         opacities=np.full(n, 0.95), colors=shaded(front) / 255.0, object_id=np.zeros(n), photo=photo,
         mask=(coverage > 0.5).astype(np.uint8), background=np.full((SIZE, SIZE, 3), 100, np.uint8),
-        depth_prior=np.where(coverage > 0.5, DISTANCE - RADIUS, np.nan), object_volumes=np.full(1, np.nan),
+        depth_prior=np.where(coverage > 0.5, DISTANCE - RADIUS, np.nan), **solid_fields([None]),
         loss=np.zeros((0, 1)), loss_terms=["none"])
 
 

@@ -4,6 +4,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
+from schemas.solid import solid_fields
 from stages.enhance.flow import enhance_frames
 from stages.enhance.relight import Relighting, fit_shading, to_linear, to_srgb
 from testing.photographs import sphere_hits
@@ -67,7 +68,7 @@ def turned_sphere():
         rotations=np.array([[1.0, 0, 0, 0]]), opacities=np.ones(1), colors=np.full((1, 3), 0.5),
         object_id=np.zeros(1), photo=(photo + 0.5).astype(np.uint8), mask=on.astype(np.uint8),
         background=np.full((SIZE, SIZE, 3), 128), depth_prior=np.where(on, distance, np.nan).astype(np.float32),
-        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
+        **solid_fields([None]), loss=np.zeros((0, 1)), loss_terms=["none"])
     # compared away from both silhouettes (the rest one in the photograph, the current one in the frame),
     # where the normals' blur mixes in the rim
     compare = on & (rest[..., 2] < -0.5) & (normals[..., 2] < -0.5)

@@ -7,6 +7,7 @@ import torch
 
 import splat
 from schemas.artifacts import GaussiansArtifact, TrajectoriesArtifact
+from schemas.solid import solid_fields
 from stages.enhance.flow import band_limited_upsample, enhance_frames, photograph_at, sample_at
 from stages.render.render import render_camera, render_video
 from stages.render.source_map import map_moments, source_points, source_spread
@@ -45,7 +46,7 @@ def disc_gaussians() -> GaussiansArtifact:
         rotations=np.tile([1.0, 0, 0, 0], (2 * n, 1)), opacities=np.ones(2 * n),
         colors=np.concatenate([photo[rows, cols] / 255.0, np.tile([0.0, 1.0, 0.0], (n, 1))]),
         object_id=np.zeros(2 * n), photo=photo, mask=disc.astype(np.uint8), background=np.full((H, W, 3), 128),
-        depth_prior=np.where(disc, DEPTH, np.nan), object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)),
+        depth_prior=np.where(disc, DEPTH, np.nan), **solid_fields([None]), loss=np.zeros((0, 1)),
         loss_terms=["none"])
 
 
@@ -256,7 +257,7 @@ def surfel_sphere(n: int = 6000, radius_m: float = 0.1, distance_m: float = 1.0,
         opacities=np.full(n, 0.9), colors=colours, object_id=np.zeros(n),
         photo=np.zeros((size, size, 3), np.uint8), mask=np.ones((size, size), np.uint8),
         background=np.zeros((size, size, 3), np.uint8), depth_prior=np.full((size, size), distance_m),
-        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
+        **solid_fields([None]), loss=np.zeros((0, 1)), loss_terms=["none"])
 
 
 def turned_sphere(turn_deg: float, radius_m: float = 0.1, distance_m: float = 1.0):

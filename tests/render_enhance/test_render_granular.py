@@ -17,6 +17,7 @@ import splat
 from schemas import materials as M
 from schemas.artifacts import GaussiansArtifact
 from schemas.scene import PhysicsConfig
+from schemas.solid import solid_fields
 from stages.enhance.compositing import blend_over_background, unpremultiply
 from stages.enhance.flow import enhance_frames
 from stages.render.interior import (EDGE_PX, GRAIN_SHADE, grain_colours, grain_offsets, grain_relief, grain_shapes,
@@ -64,7 +65,7 @@ def two_coloured_log() -> GaussiansArtifact:
         opacities=np.full(len(points), 0.9), colors=colours, object_id=np.zeros(len(points)),
         photo=np.round(255 * photo).astype(np.uint8), mask=disc.astype(np.uint8),
         background=np.zeros((SIZE, SIZE, 3), np.uint8), depth_prior=np.full((SIZE, SIZE), DISTANCE),
-        object_volumes=np.full(1, np.nan), loss=np.zeros((0, 1)), loss_terms=["none"])
+        **solid_fields([None]), loss=np.zeros((0, 1)), loss_terms=["none"])
 
 
 @pytest.fixture(scope="module")

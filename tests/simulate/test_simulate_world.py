@@ -14,7 +14,9 @@ from scipy.spatial.transform import Rotation
 from schemas import materials as M
 from schemas.program import InputError
 from schemas.scene import PhysicsConfig
+from schemas.solid import SolidGrid
 from stages.reconstruct.closure import object_depths
+from stages.reconstruct.pipeline import object_solid
 from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lift import lift_object
 from stages.simulate import quasi_static, rest_state
@@ -276,14 +278,15 @@ def test_a_body_no_support_holds_is_named_before_the_run(caplog):
         assert any("does not stand as reconstructed" in r.getMessage() for r in caplog.records) == warned, tilt
 
 
-def photographed_body(mask: np.ndarray, size_m: float, pitch: float) -> tuple[np.ndarray, np.ndarray, float]:
+def photographed_body(mask: np.ndarray, size_m: float, pitch: float) -> tuple[np.ndarray, np.ndarray, SolidGrid]:
     """The Gaussians' means (N,3) m lifted from the closure's body of silhouette `mask` (H,W) bool under a
-    40-degree camera pitched `pitch` degrees, that camera's K (3,3), and the body's volume (m^3)."""
+    40-degree camera pitched `pitch` degrees, that camera's K (3,3), and the body's solid as pm-reconstruct
+    passes it on."""
     height, width = mask.shape
     K = intrinsics_from_fov(40, width, height)
     depth = object_depths(mask.astype(np.uint8), K, [size_m], pitch)[0]
     gaussians, _ = lift_object(depth, K, np.zeros((height, width, 3), np.uint8), 0)
-    return gaussians.means, K, depth.volume(K)
+    return gaussians.means, K, object_solid(depth, K, 0)
 
 
 @pytest.mark.parametrize("name", ["tall upright cylinder", "capsule leaning 45 degrees"])
@@ -296,11 +299,11 @@ def test_a_photographed_body_that_stands_is_not_named_and_one_that_tips_is(name,
     shape = (UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(10.0), 0.025, 0.16)
              if name == "tall upright cylinder" else Capsule.tilted(tilt_deg=45.0))
     mask = photograph(shape, K, np.eye(4), 256, 192).mask
-    means, K, volume = photographed_body(mask, shape.size_m, 10.0)
+    means, K, solid = photographed_body(mask, shape.size_m, 10.0)
     with caplog.at_level("WARNING", logger="physmotion.simulate"):
         sim = Simulation(PhysicsConfig(grid=24, fps=10, duration_s=0.6, ground={"type": "friction", "friction": 0.6}),
                          [M.Rigid()], means, np.zeros(len(means), int), pitch_deg=10.0, silhouette=(mask, K),
-                         prior_volumes=np.array([volume]))
+                         solids=[solid])
     named = any("does not stand as reconstructed" in r.getMessage() for r in caplog.records)
     tr = sim.run()
     turn = max(turn_deg(tr.positions[0], tr.positions[f], tr.masses) for f in range(len(tr.time_s)))
