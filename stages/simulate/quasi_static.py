@@ -12,7 +12,7 @@ the first's is the square of the remaining amplitude's share of the first swing,
 (1e-4: a hundredth of the deflection) the bodies ring in the run by less than that. A stiff body's
 higher modes peak every few substeps once the slow one has settled, each peak stopping the whole
 body, so its energy ratio creeps: the 23 cm metal ball of benchmarks/examples.py reached 2e-5 after
-227 substeps (4 peaks) and 6e-6 after 1508 (132 peaks); asked for 1e-7 it ran to its cap.
+227 substeps (4 peaks) and 5.5e-6 after 1508 (132 peaks); asked for 1e-7 it ran to its cap.
 
 Stability: a step is the explicit CFL substep; the stops take energy out and add none. A larger step
 is not taken: on the frozen geometry the stiffness, not the motion, bounds it, and scaling the masses
