@@ -8,17 +8,15 @@ toss by more than 2 % of the toss's kinetic energy. Rigid, metal and plasticine 
 ground (metal on slip ground as well, measured 1.4 and 1.1 degrees level and pitched, but its stiff wave
 costs 5700 substeps a run, so only friction ground runs here).
 
-Jelly (E = 5e4 Pa) fails, and is held here as a strict expected failure, so that the day its body lands
-where it went up the mark has to go. It bounces four times in the second and each landing turns it by the
-lever between its contact and its centre of mass: the ground node layer's mass centroid lies 0.89 mm
-(level) and 0.57 mm (pitched) from the centre of mass along the ground, because the reconstructed ball's
-bottom is not symmetric about the vertical through its centre of mass (its front, sampled a pixel at a
-time, reaches lower than its sparse back), and the ball turns 46 and 39 degrees on slip ground, 21 and 14
-on friction ground, where the spin rolls it 25 and 17 mm away. The solver adds no lever of its own
-(tests/simulate/test_simulate_physics.py: mirror images spin mirrored, a mirror-symmetric ball not at all);
-the turn grows with the lever, and at most 3 degrees in four bounces asks for a lever of a few hundredths
-of a millimetre (0.02-0.06 mm by the ratios of turn to lever measured on a 12 cm Fibonacci sphere of 1918
-Gaussians, 0.06 mm and 7.9 degrees, and on the ball), a symmetry the reconstruction has to give.
+Jelly (E = 5e4 Pa) bounces four times in the second, and each landing turns it by the lever between its
+contact and its centre of mass: a frictionless ground gives no other torque, and the solver adds no lever
+of its own (tests/simulate/test_simulate_physics.py: mirror images spin mirrored, a mirror-symmetric ball
+not at all). So the ball passes because its body is the closure's own solid (gaussians.h5's
+/objects/solid), whose bottom lies under its centre of mass; a ball filled from its Gaussians' means has
+its ground node layer's mass centroid 0.89 mm (level) and 0.57 mm (pitched) off its centre of mass and
+turns 46 and 39 degrees on slip ground (docs/decisions/0029-toss-spin-is-the-body-s.md). At most 3 degrees in four
+bounces asks for a lever of a few hundredths of a millimetre. The jelly cases take about 45 s each on 2
+loaded cores.
 """
 from __future__ import annotations
 
