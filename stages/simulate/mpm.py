@@ -46,6 +46,9 @@ from .stencil import quadratic_weights, stencil_base
 # Nodes this close to a domain face form the wall layer; particles are kept
 # this far inside, so a quadratic stencil never leaves the grid.
 BOUNDARY_NODES = 3
+# A massless particle's velocity fit on a partial stencil adds this share of a whole stencil's moment
+# matrix (dx^2/4 I): a plane of nodes gets no gradient across it, and C stays within ~10x APIC's bound.
+REGULARISATION = 0.1
 
 GROUND_NONE, GROUND_STICKY, GROUND_SLIP, GROUND_FRICTION = range(4)
 GROUND_TYPES = {"sticky": GROUND_STICKY, "slip": GROUND_SLIP, "friction": GROUND_FRICTION}
@@ -253,6 +256,54 @@ def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_face
 def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
     """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
+    @wp.func
+    def gather_massless(velocity: wp.array4d(dtype=wp.vec3), mass: wp.array4d(dtype=float), field_bits: int,
+                        base: wp.vec3i, fx: wp.vec3, dx: float, fallback: wp.vec3):
+        """(v_p, C_p) of a massless particle: the linear velocity field v_p + C_p (x - x_p) that fits, in least
+        squares weighted by w_i, the nodes of its stencil that carry mass after the grid update.
+
+        APIC's C = 4/dx^2 sum w v (x_i - x_p)^T assumes the whole stencil, where sum w (x_i - x_p) = 0 and
+        sum w (x_i - x_p)(x_i - x_p)^T = dx^2/4 I. At a body's surface part of the stencil is empty, and
+        with the empty nodes left out neither holds: a body in free flight would shear its surface
+        Gaussians. The fit's moment matrix is that of the nodes with mass about their centre, plus
+        REGULARISATION of the whole stencil's, so it stays invertible (and C bounded) where those nodes
+        lie in a plane; on a whole stencil the fit is APIC's. v_p is the nodes' weighted mean velocity;
+        `fallback` (its own velocity) and C = 0 where no node about it carries mass.
+        """
+        weight = float(0.0)
+        v_sum = wp.vec3(0.0)
+        d_sum = wp.vec3(0.0)
+        vd = wp.mat33(0.0)  # sum of w m v (x_i - x_p)^T
+        dd = wp.mat33(0.0)  # sum of w m (x_i - x_p)(x_i - x_p)^T
+        wx = quadratic_weights(fx[0])
+        wy = quadratic_weights(fx[1])
+        wz = quadratic_weights(fx[2])
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    field = int(0)
+                    if wp.static(n_fields == 2):
+                        field = (field_bits >> (9 * i + 3 * j + k)) & 1
+                    a = float(0.0)
+                    if mass[field, base[0] + i, base[1] + j, base[2] + k] > 0.0:
+                        a = wx[i] * wy[j] * wz[k]
+                    v = velocity[field, base[0] + i, base[1] + j, base[2] + k]
+                    d = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
+                    weight += a
+                    v_sum += a * v
+                    d_sum += a * d
+                    vd += a * wp.outer(v, d)
+                    dd += a * wp.outer(d, d)
+        if weight <= 0.0:
+            return fallback, wp.mat33(0.0)
+        v_mean = v_sum / weight
+        d_mean = d_sum / weight
+        if weight >= 1.0 - 1e-6:  # the whole stencil: APIC's C
+            return v_mean, (4.0 / (dx * dx)) * vd
+        moments = dd - weight * wp.outer(d_mean, d_mean) \
+            + (REGULARISATION * 0.25 * dx * dx) * wp.identity(n=3, dtype=float)
+        return v_mean, (vd - weight * wp.outer(v_mean, d_mean)) * wp.inverse(moments)
+
     @wp.kernel(module="unique")
     def grid_to_particle(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles):
         """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
@@ -262,8 +313,8 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         layer. Particles of bodies that meet the ground themselves (own_ground, rigid) gather the
         velocity before the ground's contact law. With two fields each node is read in the particle's
         own field there (cracks.field_bits, written by P2G). A massless particle (a Gaussian riding on
-        its body's solid) gathers with the weights times the nodes' masses, normalised: it moves with the
-        material about it, not with the empty nodes beyond its body's surface.
+        its body's solid) gathers by gather_massless: it moves with the material about it, not with the
+        empty nodes beyond its body's surface.
         """
         p = wp.tid() + start
         if particles.free[p] != 0:
@@ -280,56 +331,42 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         wx = quadratic_weights(fx[0])
         wy = quadratic_weights(fx[1])
         wz = quadratic_weights(fx[2])
-        # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
-        ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
-        oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
-        oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
-        # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
-        # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
-        massless = particles.mass[p] <= 0.0
         vp = wp.vec3(0.0)
-        Bx = wp.vec3(0.0)
-        By = wp.vec3(0.0)
-        Bz = wp.vec3(0.0)
-        weight = float(0.0)  # sum of w m over the stencil, for a massless particle
-        for i in range(3):
-            v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
-            vy_i = wp.vec3(0.0)  # ... of oy wz v
-            vz_i = wp.vec3(0.0)  # ... of wy oz v
-            m_i = float(0.0)  # ... of wy wz m
-            for j in range(3):
-                v_ij = wp.vec3(0.0)  # sum over k of wz v
-                vz_ij = wp.vec3(0.0)  # ... of oz v
-                m_ij = float(0.0)  # ... of wz m
-                for k in range(3):
-                    field = int(0)
-                    if wp.static(n_fields == 2):
-                        field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
-                    vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
-                    if massless:
-                        mi = grid.mass[field, base[0] + i, base[1] + j, base[2] + k]
-                        vi = mi * vi
-                        m_ij += wz[k] * mi
-                    v_ij += wz[k] * vi
-                    vz_ij += oz[k] * vi
-                v_i += wy[j] * v_ij
-                vy_i += oy[j] * v_ij
-                vz_i += wy[j] * vz_ij
-                m_i += wy[j] * m_ij
-            vp += wx[i] * v_i
-            Bx += ox[i] * v_i
-            By += wx[i] * vy_i
-            Bz += wx[i] * vz_i
-            weight += wx[i] * m_i
-        if massless:
-            if weight > 0.0:
-                vp = vp / weight
-                Bx = Bx / weight
-                By = By / weight
-                Bz = Bz / weight
-            else:  # no material about it: it keeps its velocity
-                vp = particles.v[p]
-        Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
+        Cp = wp.mat33(0.0)
+        if particles.mass[p] <= 0.0:
+            vp, Cp = gather_massless(velocity, grid.mass, cracks.field_bits[p], base, fx, dx, particles.v[p])
+        else:
+            # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
+            ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
+            oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
+            oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
+            # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
+            # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
+            Bx = wp.vec3(0.0)
+            By = wp.vec3(0.0)
+            Bz = wp.vec3(0.0)
+            for i in range(3):
+                v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
+                vy_i = wp.vec3(0.0)  # ... of oy wz v
+                vz_i = wp.vec3(0.0)  # ... of wy oz v
+                for j in range(3):
+                    v_ij = wp.vec3(0.0)  # sum over k of wz v
+                    vz_ij = wp.vec3(0.0)  # ... of oz v
+                    for k in range(3):
+                        field = int(0)
+                        if wp.static(n_fields == 2):
+                            field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
+                        vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
+                        v_ij += wz[k] * vi
+                        vz_ij += oz[k] * vi
+                    v_i += wy[j] * v_ij
+                    vy_i += oy[j] * v_ij
+                    vz_i += wy[j] * vz_ij
+                vp += wx[i] * v_i
+                Bx += ox[i] * v_i
+                By += wx[i] * vy_i
+                Bz += wx[i] * vz_i
+            Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
         if particles.prescribed[p] != 0:
             vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid
         # a closed face keeps particles off its wall layer; through an open one they leave the grid
