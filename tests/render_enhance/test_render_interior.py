@@ -41,7 +41,7 @@ def torn_in_two(gaussians) -> TrajectoriesArtifact:
     """The sphere filled as pm-simulate fills it, cut through its centre by a plane turned 17 degrees
     towards the camera (so that one torn face is seen), its halves moved apart rigidly sideways: 0,
     2 and 8 cm in all."""
-    fill, volumes, _ = fill_object(gaussians.means.astype(np.float64), 0.02, 8)
+    fill, volumes = fill_object(gaussians.means.astype(np.float64), 0.02, 8)
     rest = np.concatenate([gaussians.means, fill])
     P, G, T = len(rest), len(gaussians.means), 3
     normal = np.array([1.0, 0.0, -0.3]) / np.hypot(1.0, 0.3)
