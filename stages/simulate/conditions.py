@@ -132,13 +132,13 @@ class Conditions:
         masses: (P,) kg.
         Q: (3,3) world -> simulation rotation.
         gravity_frame: (3,3) rows: the gravity-aligned axes in the world frame (domain.gravity_frame).
-        scene_file: named in the error when a region holds no particle.
+        scene_file: named in the error when a region holds no material.
 
     `acceleration` is the largest acceleration in m/s^2 a force or torque condition gives a particle
     (largest_acceleration): the substep must follow what they set moving, as it does a fall.
 
     Raises:
-        InputError: a region that holds no particle of its object, or a torque's region with no
+        InputError: a region that holds no particle with mass of its object, or a torque's region with no
             extent about some axis (one point, one line of particles), which no forces on it can turn.
     """
 
@@ -152,9 +152,9 @@ class Conditions:
             to_frame = condition_frame(c, gravity_frame)  # world -> the condition's frame
             obj = np.flatnonzero(object_id == c.object)
             idx = obj[region_members(c.region, rest_world[obj] @ to_frame.T)]
-            if len(idx) == 0:
+            if masses[idx].sum() <= 0:  # none, or only its massless Gaussians
                 raise InputError(scene_file, f"physics.conditions[{i}].region",
-                                 f"the region holds no particle of object {c.object}",
+                                 f"the region holds none of object {c.object}'s material, only its surface",
                                  "enlarge it; regions are in the object's own [0,1]^3 box (see setup.png)")
             m = masses[idx].astype(np.float64)
             if c.type == "torque":
