@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # the repository, 
 from benchmarks.figures import add_arguments, invocation, write_figures  # noqa: E402
 from benchmarks.rest import PRESET_MODELS  # noqa: E402
 from schemas import load_scene  # noqa: E402
-from schemas.artifacts import GaussiansArtifact, read_artifact  # noqa: E402
+from schemas.artifacts import GaussiansArtifact, read_artifact, read_header  # noqa: E402
 from schemas.scene import PhysicsConfig  # noqa: E402
 from stages.reconstruct.cli import main as reconstruct  # noqa: E402
 from stages.simulate.simulation import Simulation  # noqa: E402
@@ -42,10 +42,11 @@ COLUMNS = ["example", "material", "particles", "grid", "settle substeps", "run s
 
 
 def gaussians_of(scene_file: Path, results: Path, cache: Path) -> Path:
-    """gaussians.h5 of a scene: the workflow's results/<name>/ one, else reconstructed into cache/<name>/."""
+    """gaussians.h5 of a scene: the workflow's results/<name>/ one, else reconstructed into cache/<name>/
+    (again where the cached one is of another schema version)."""
     name = scene_file.parent.name
     for path in (results / name / "gaussians.h5", cache / name / "gaussians.h5"):
-        if path.exists():
+        if path.exists() and read_header(path).get("schema_version") == GaussiansArtifact.VERSION:
             return path
     path = cache / name / "gaussians.h5"
     path.parent.mkdir(parents=True, exist_ok=True)
