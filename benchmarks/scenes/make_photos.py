@@ -9,6 +9,7 @@
 - wheel/:      `colorwheel` on a light grey page, a 25 cm disc of coloured sand that collapses to a heap
                (benchmarks/quality.py, granular).
 - shuttle_sand/: `astronaut`, the model shuttle behind her (white orbiter, brown tank) as 30 cm of sand.
+- shuttle/:   the same shuttle as a 30 cm jelly toy knocked at its top (benchmarks/toss.py, rest.py).
 
 Usage: python benchmarks/scenes/make_photos.py
 """
@@ -49,4 +50,5 @@ if __name__ == "__main__":
     page = np.full((420, 620, 3), 235, np.uint8)
     page[25:395, 125:496] = skimage.data.colorwheel()
     write_image(HERE / "wheel" / "photo.png", cv2.cvtColor(page, cv2.COLOR_RGB2BGR))
-    write_image(HERE / "shuttle_sand" / "photo.png", cv2.cvtColor(skimage.data.astronaut(), cv2.COLOR_RGB2BGR))
+    for name in ("shuttle_sand", "shuttle"):
+        write_image(HERE / name / "photo.png", cv2.cvtColor(skimage.data.astronaut(), cv2.COLOR_RGB2BGR))
