@@ -32,6 +32,13 @@ def gravity_axes(down: np.ndarray) -> np.ndarray:
     return np.stack([x, up, np.cross(x, up)])
 
 
+def inside_share(distance: np.ndarray, cell: float) -> np.ndarray:
+    """The share (shape of distance) of a cube of side `cell` m that lies inside a surface at signed distance
+    `distance` m from its centre (negative inside): 1/2 less the distance over the side (exact for a face
+    parallel to the cube's)."""
+    return np.clip(0.5 - distance / cell, 0.0, 1.0)
+
+
 @dataclass
 class SolidGrid:
     """One object's solid. distance (N,N,N) f4: signed distance in m (negative inside) at the nodes;
@@ -54,9 +61,12 @@ class SolidGrid:
         return ndimage.map_coordinates(self.distance.astype(np.float64), ijk.T, order=1, mode="nearest")
 
     def inside_fraction(self, points: np.ndarray, cell: float) -> np.ndarray:
-        """(P,) the share of a cube of side `cell` m about each point (P,3) that lies inside: 1/2 less the
-        signed distance over the side (exact for a face parallel to the cube's)."""
-        return np.clip(0.5 - self.distance_at(points) / cell, 0.0, 1.0)
+        """(P,) the share of a cube of side `cell` m about each point (P,3) that lies inside (inside_share)."""
+        return inside_share(self.distance_at(points), cell)
+
+    def volume(self) -> float:
+        """m^3 inside the solid: each node's cube, one spacing wide, by its share inside."""
+        return float(inside_share(self.distance.astype(np.float64), self.spacing).sum()) * self.spacing ** 3
 
 
 def solid_fields(solids: Sequence[Optional[SolidGrid]]) -> dict:

@@ -14,7 +14,7 @@ from typing import Optional
 
 import numpy as np
 
-from schemas.solid import NODES, SolidGrid, gravity_axes
+from schemas.solid import NODES, SolidGrid, gravity_axes, inside_share
 
 from .standing import Revolution
 from .upright_box import UprightBox
@@ -97,7 +97,7 @@ def sample(body: Body, points: np.ndarray, nodes: int = NODES) -> Optional[Solid
                - 0.5 * (nodes - 1)) * spacing @ axes
     for _ in range(CENTRING_ROUNDS):
         distance = body.distance(centre + offsets)
-        weight = np.clip(0.5 - distance / spacing, 0.0, 1.0)
+        weight = inside_share(distance, spacing)
         if weight.sum() <= 0:
             return None
         centre = centre + weight @ offsets / weight.sum()

@@ -129,9 +129,8 @@ def object_solid(depth: ObjectDepth, K: np.ndarray, k: int) -> Optional[SolidGri
     points = np.concatenate([rays * depth.front[pixels][:, None], rays * depth.back[pixels][:, None]])
     solid = sample(depth.body, points)
     if solid is not None:
-        inside = np.clip(0.5 - solid.distance.astype(np.float64) / solid.spacing, 0.0, 1.0)
         log.info("object %d: its solid holds %.4g m^3 (%d^3 nodes of %.2f mm; its depths enclose %.4g m^3)", k,
-                 inside.sum() * solid.spacing ** 3, solid.distance.shape[0], 1e3 * solid.spacing, depth.volume(K))
+                 solid.volume(), solid.distance.shape[0], 1e3 * solid.spacing, depth.volume(K))
     return solid
 
 
