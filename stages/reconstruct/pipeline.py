@@ -108,7 +108,7 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
     if scene.reconstruct.prior == "lgm":
         from .lgm.prior import learned_objects
 
-        initial, seen, _ = learned_objects(learned, scene.file, photo, labels, [d.front for d in depths], K,
+        initial, seen = learned_objects(learned, scene.file, photo, labels, [d.front for d in depths], K,
                                                  [o.size_m for o in scene.objects], MAX_GAUSSIANS)
     else:
         initial, seen = initial_gaussians(scene, photo, labels, depths, K)

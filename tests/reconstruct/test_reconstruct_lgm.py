@@ -20,7 +20,7 @@ from stages.reconstruct.geometry import intrinsics_from_fov
 from stages.reconstruct.lgm import prior as prior_module
 from stages.reconstruct.lgm.loading import find_lgm, find_multiview, load_lgm, load_multiview, meta_shapes
 from stages.reconstruct.lgm.multiview import MultiViewUNetModel, frame_cameras, sample_views
-from stages.reconstruct.lgm.placement import enclosed_volume, nearest_depth, place, seen_from_camera
+from stages.reconstruct.lgm.placement import nearest_depth, place, seen_from_camera
 from stages.reconstruct.lgm.rays import AZIMUTHS_DEG, CAMERA_RADIUS, FOVY_DEG, plucker_embedding, view_poses
 from stages.reconstruct.lgm.splatter import decode, prune
 from stages.reconstruct.lgm.unet import LGM, LGMConfig, MultiViewAttention
@@ -251,19 +251,6 @@ def test_placement_keeps_left_right_and_up_down():
     assert (covered & mask).sum() / (covered | mask).sum() > 0.8
     mirrored = covered[:, ::-1], covered[::-1, :]
     assert all((m & mask).sum() / (m | mask).sum() < 0.5 for m in mirrored)
-
-
-def test_enclosed_volume_of_sampled_surfaces():
-    generator = np.random.default_rng(0)
-    sphere = generator.normal(size=(4000, 3))
-    sphere *= 0.5 / np.linalg.norm(sphere, axis=1, keepdims=True)
-    assert enclosed_volume(sphere) == pytest.approx(4 / 3 * math.pi * 0.5 ** 3, rel=0.1)
-    sides = np.array([0.4, 0.2, 0.3])
-    faces = generator.choice(3, size=6000, p=[0.06 / 0.26, 0.12 / 0.26, 0.08 / 0.26])  # by their areas
-    box = (generator.random((6000, 3)) - 0.5) * sides
-    box[np.arange(6000), faces] = np.sign(generator.random(6000) - 0.5) * sides[faces] / 2
-    turned = box @ np.linalg.qr(generator.normal(size=(3, 3)))[0].T
-    assert enclosed_volume(turned) == pytest.approx(np.prod(sides), rel=0.1)
 
 
 def scene_with_prior(tmp_path, prior: str, shape=None, iterations: int = 1, enhance=None):

@@ -1,4 +1,4 @@
-"""LGM's Gaussians placed into the input camera, which of them the photograph sees, and the volume they enclose.
+"""LGM's Gaussians placed into the input camera, and which of them the photograph sees.
 
 Placement (the paper's Sec. 3.3 start): the object frame is OpenGL's with view 0
 facing the photograph, so the cloud turns 180 degrees about x into the camera's
@@ -17,7 +17,6 @@ import math
 
 import numpy as np
 from scipy import ndimage
-from scipy.spatial import cKDTree
 
 from schemas.camera import project_points
 from schemas.ply import GaussianCloud
@@ -32,15 +31,6 @@ FRONT_LAYER = 0.03
 """A Gaussian within this share of size_m behind the nearest one in its pixel counts as seen."""
 GAUSSIANS_PER_PIXEL = 8
 """Gaussians per object pixel when telling the seen ones: about half of them on the near side."""
-VOLUME_CELLS = 48
-"""Cells along the largest extent of the occupancy grid that measures the enclosed volume, at most."""
-NEIGHBOURS = 3
-"""The grid's cells are at least the median distance from a Gaussian to its this-many-th nearest one, so that
-the cells holding Gaussians make a closed sheet (a uniformly sampled ball: 1.04 of its volume)."""
-ENCLOSING_WALLS = 5
-"""A cell is inside when the surface lies beyond it in this many of the six axis directions: one gap in the
-sampled surface (LGM leaves some where no view looks straight at it) does not let the cells in line with it out,
-at the price of counting an open cavity (a cup's) as solid."""
 
 
 def pixels_of(means: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -95,34 +85,3 @@ def seen_from_camera(gaussians: Gaussians, K: np.ndarray, mask: np.ndarray, size
     zbuffer, index = nearest_depth(gaussians.means, coarse, shape)
     nearest = np.where(index >= 0, zbuffer.reshape(-1)[np.maximum(index, 0)], np.inf)
     return gaussians.means[:, 2] <= nearest + FRONT_LAYER * size_m
-
-
-def enclosed_volume(means: np.ndarray, cells: int = VOLUME_CELLS) -> float:
-    """m^3 inside the surface the points (N,3) sample, on a grid of ``cells`` along their largest extent, or
-    coarser where the points are sparser (cells as large as the median distance to a point's NEIGHBOURS-th
-    nearest neighbour, so that the cells holding points make a closed sheet).
-
-    Cells holding a point (closed over one-cell gaps) are the surface; a cell is inside when the surface lies
-    beyond it in ENCLOSING_WALLS of the six axis directions. The outermost layer of cells counts half (the
-    surface runs through it)."""
-    low, high = means.min(0), means.max(0)
-    spacing = float(np.median(cKDTree(means).query(means, k=NEIGHBOURS + 1)[0][:, -1]))
-    cell = max(float((high - low).max()) / cells, spacing)
-    index = np.floor((means - low) / cell).astype(int) + 2  # a margin of empty cells around the body
-    surface = np.zeros(index.max(0) + 3, bool)
-    surface[tuple(index.T)] = True
-    surface = ndimage.binary_closing(surface, iterations=1)
-    sheet = ndimage.binary_dilation(surface, iterations=1)  # plugs pinholes for the rays below
-    walls = np.zeros(surface.shape, np.int8)  # in how many of the six axis directions the surface lies
-    for axis in range(3):
-        for ordered in (sheet, np.flip(sheet, axis)):
-            beyond = np.zeros_like(ordered)  # a sheet cell strictly before this one along the axis
-            inner = [slice(None)] * 3
-            inner[axis] = slice(1, None)
-            outer = [slice(None)] * 3
-            outer[axis] = slice(None, -1)
-            beyond[tuple(inner)] = np.maximum.accumulate(ordered, axis=axis)[tuple(outer)]
-            walls += beyond if ordered is sheet else np.flip(beyond, axis)
-    solid = surface | (walls >= ENCLOSING_WALLS)
-    outer = solid & ~ndimage.binary_erosion(solid)
-    return (float(solid.sum()) - 0.5 * float(outer.sum())) * cell ** 3

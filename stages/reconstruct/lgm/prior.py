@@ -17,7 +17,7 @@ from schemas import InputError
 from ..lift import Gaussians
 from .loading import find_lgm, find_multiview, load_lgm, load_multiview
 from .multiview import DIFFUSION_STEPS, GUIDANCE, MultiViewModels, sample_views
-from .placement import enclosed_volume, place, seen_from_camera
+from .placement import place, seen_from_camera
 from .rays import plucker_embedding, view_poses
 from .splatter import decode, prune
 from .unet import LGM
@@ -107,19 +107,18 @@ class LearnedPrior:
 
 def learned_objects(prior: LearnedPrior, scene_file: Path, photo: np.ndarray, labels: np.ndarray,
                     fronts: list[np.ndarray], K: np.ndarray, sizes_m: list[float],
-                    budget: int) -> tuple[Gaussians, np.ndarray, np.ndarray]:
-    """Every object's learned Gaussians in the camera ``K``: (Gaussians, (G,) bool which the photograph sees,
-    (objects,) m^3 each encloses). ``fronts``: the prior's camera-space front depths (H,W) per object; at most
+                    budget: int) -> tuple[Gaussians, np.ndarray]:
+    """Every object's learned Gaussians in the camera ``K``: (Gaussians, (G,) bool which the photograph sees).
+    ``fronts``: the prior's camera-space front depths (H,W) per object; at most
     ``budget`` Gaussians in all (a fixed random subset of each object's where more)."""
-    parts, volumes = [], []
+    parts = []
     for k, (front, size_m) in enumerate(zip(fronts, sizes_m)):
         placed = prior.gaussians(photo, labels == k + 1, K, size_m, front, k)
         if len(placed) < MIN_GAUSSIANS:
             raise InputError(scene_file, f"objects[{k}]", f"LGM left {len(placed)} Gaussians of the object on its "
                              "mask (transparent, or outside the mask once placed)", "check the object's mask or box; "
                              "or use reconstruct.prior: symmetric")
-        volumes.append(enclosed_volume(placed.means))
-        log.info("object %d: %d learned Gaussians placed, enclosing %.4g m^3", k, len(placed), volumes[-1])
+        log.info("object %d: %d learned Gaussians placed", k, len(placed))
         parts.append(placed)
     share = budget // max(1, len(parts))
     generator = np.random.default_rng(0)
@@ -127,4 +126,4 @@ def learned_objects(prior: LearnedPrior, scene_file: Path, photo: np.ndarray, la
              for part in parts]
     seen = np.concatenate([seen_from_camera(part, K, labels == k + 1, size_m)
                            for k, (part, size_m) in enumerate(zip(parts, sizes_m))])
-    return Gaussians.concatenate(parts), seen, np.array(volumes)
+    return Gaussians.concatenate(parts), seen
