@@ -134,10 +134,11 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         uv = smooth_source(rendered_uv)
         seen = seen_fraction(coarse.source_confidence[t], coarse.source_coherence[t])
         rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
-        from_photo, rendered, inside = continuation(t, uv, seen, rendered, hidden_surfaces == "photo")
+        surface = trust(coarse.source_coherence[t], threshold)
+        from_photo, rendered, inside = continuation(t, uv, seen, rendered, surface, hidden_surfaces == "photo")
         trusted = trust(coarse.source_confidence[t], threshold)
         if hidden_surfaces == "photo":
-            trusted = np.maximum(trusted, trust(coarse.source_coherence[t], threshold))
+            trusted = np.maximum(trusted, surface)
         weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
         background = backdrop(coarse.alpha[t], rendered_uv, shadows(t, scale) if ground else None)

@@ -299,7 +299,7 @@ class Continuation:
         continued = sample_at(a.continued, uv) * shading_now[..., None]
         return own * from_fine * gain + (1 - own) * continued, shading_then, sample_at(a.inside, uv)
 
-    def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray,
+    def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray, surface: np.ndarray,
                  unseen_from_photo: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Frame t's object colour from the photograph (h, w, 3) sRGB in [0, 255], the render re-shaded
         alike (h, w, 3), and where the photograph holds the pixel's surface (h, w) in [0, 1].
@@ -308,6 +308,9 @@ class Continuation:
             uv: (h, w, 2) the frame's smoothed source points at output resolution (flow.smooth_source).
             seen: (h, w) in [0, 1], how much of each pixel's surface the photograph saw.
             rendered: (h, w, 3) the render's colour, sRGB in [0, 255].
+            surface: (h, w) in [0, 1], how surely the render shows the object's surface, carried smoothly
+                from the photograph (the trusted source_coherence): the render's colour gives way to the
+                continued one only there, never where it shows the interior, grains or tumbling material.
             unseen_from_photo: the unseen surfaces' render gives way to the continued colour too
                 (enhance.hidden_surfaces "photo"); else only the seen ones' does.
         """
@@ -332,6 +335,7 @@ class Continuation:
         recorded = np.where(np.isfinite(uv[..., 0]), recorded, 1.0)[..., None]
         gain = np.clip(shading_now / np.maximum(then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)
         gain = 1 + recorded * (np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None] - 1)
-        continued = (1 - recorded) * (inside if unseen_from_photo else s * inside)[..., None]
+        continued = ((1 - recorded) * surface[..., None]
+                     * (inside if unseen_from_photo else s * inside)[..., None])
         relit_render = (1 - continued) * to_linear(rendered) * gain + continued * colour
         return to_srgb(colour).astype(np.float32), to_srgb(relit_render).astype(np.float32), inside.astype(np.float32)

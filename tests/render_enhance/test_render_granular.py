@@ -120,9 +120,6 @@ def test_the_heap_shows_the_colour_of_the_sand_in_front(heap):
     assert abs(orange_share(coarse.rgb[-1], coarse.alpha[-1]) - in_front) < 0.03
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "since gaussians.h5 carries the solid and the Gaussians ride massless (merge 7e69e38), the flow "
-    "backend keeps 0.53 of the heap's sharpness (455 against 866), under 0.6: issue 31"))
 def test_the_flow_backend_keeps_the_grains(heap):
     """pm-enhance's flow backend shows the heap's grains as sharp as pm-render draws them: inside the heap
     (alpha > 0.5, its 3 px edge left out) the variance of the Laplacian of the enhanced last frame is at

@@ -160,9 +160,6 @@ def test_interior_takes_the_colour_of_the_surface_it_lies_under():
         assert u == candidates[np.argmin(((means[candidates] - p) ** 2).sum(1))]
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "since gaussians.h5 carries the solid and the Gaussians ride massless (merge 7e69e38), the flow backend "
-    "shows photograph pixels where the surface opens (up to 255 against the render's interior): issue 31"))
 def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     """Where the surface has opened and the interior shows in front (the render's distance a lattice
     spacing nearer than that of the Gaussians alone, rendered by splat), the photograph is not trusted:
