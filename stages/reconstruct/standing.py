@@ -150,13 +150,23 @@ def circles(centres: np.ndarray, radii: np.ndarray, count: int = CIRCLE_POINTS) 
 @dataclass
 class Revolution:
     """A body of revolution about the vertical line x = axis_x, z = 1 of the gravity frame: slabs between
-    heights edges (S+1,) (y, downwards) of radii (S,)."""
+    heights edges (S+1,) (y, downwards) of radii (S,); ball its diameter if it is a ball; top_face whether its
+    top is a flat face whose rim the outline traces (flat_end), not a dome."""
 
     axis_x: float
     edges: np.ndarray
     radii: np.ndarray
     ball: Optional[float] = None
+    top_face: bool = False
     kind = "body of revolution"
+
+    def seen_turned(self) -> bool:
+        """Whether the picture tells it from a body lying across the view: a ball, a body no wider than tall
+        (whose depth, its width, a mirror closure gives it too), or one whose top is a face (a rim traced along
+        the outline, as a cup's, a tin's, a cake's seen from above). A body wider than tall with a domed top
+        is what a loaf or a capsule lying across the picture shows, every horizontal slice a circle."""
+        return (self.ball is not None or self.top_face
+                or 2 * float(self.radii.max()) <= float(self.edges[-1] - self.edges[0]))
 
     @property
     def extent(self) -> float:
@@ -341,7 +351,7 @@ def revolution(view: GravityView) -> Optional[Revolution]:
             (start, stop), centre, rho = dome
             beyond = (heights > min(start, stop)) & (heights < max(start, stop))
             radii[beyond] = np.minimum(radii[beyond], np.sqrt(np.maximum(rho ** 2 - (heights[beyond] - centre) ** 2, 0)))
-    return Revolution(axis_x, edges, radii, ball)
+    return Revolution(axis_x, edges, radii, ball, top_dome is None)
 
 
 def seen_ends(view: GravityView, axis_x: float, edges: np.ndarray, radii: np.ndarray) -> tuple[int, int]:
@@ -433,19 +443,43 @@ def image_of(view: GravityView, solid: Revolution | UprightBox) -> tuple[np.ndar
 
 
 def overlap(view: GravityView, image: np.ndarray) -> tuple[float, np.ndarray]:
-    """IoU of the solid's image (H,W) bool with the silhouette less its handles (HANDLE_THICKNESS), and that
-    part of the silhouette (H,W) bool."""
+    """IoU of the solid's image (H,W) bool with the silhouette less its handles, and that part of the
+    silhouette (H,W) bool. A piece of the silhouette outside the image is a handle where it is thin
+    (HANDLE_THICKNESS) and has no twin across the image's middle (mirrored_pieces): a handle stands out on
+    one side, where a solid of the wrong shape (a turned body for a loaf lying across the picture) misses
+    the outline on both."""
     mask = view.mask
     rest = mask & (ndimage.distance_transform_edt(~image) > NEAR_PX)
     pieces, count = ndimage.label(rest)
     own = float(ndimage.distance_transform_edt(image).max())
+    twinned = mirrored_pieces(image, pieces)
     handles = np.zeros_like(mask)
     for k, piece in enumerate(ndimage.find_objects(pieces), start=1):
         part = pieces[piece] == k
-        if ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max() <= HANDLE_THICKNESS * own:
+        if k not in twinned and ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max() <= HANDLE_THICKNESS * own:
             handles[piece] |= part
     target = mask & ~handles
     return float(np.sum(image & target) / max(np.sum(image | target), 1)), target
+
+
+def mirrored_pieces(image: np.ndarray, pieces: np.ndarray) -> set[int]:
+    """The labels of the pieces (H,W) int (0: none) whose mirror image across the middle of the solid's
+    image (H,W) bool, row by row (above or below the image, its first or last row's), comes within NEAR_PX
+    of a piece (itself included)."""
+    rows, cols = np.nonzero(image)
+    if len(rows) == 0:
+        return set()
+    held = np.unique(rows)
+    middle = np.array([0.5 * (cols[rows == r].min() + cols[rows == r].max()) for r in held])
+    height, width = image.shape
+    axis = np.interp(np.arange(height), held, middle)  # beyond the image: its first or last row's
+    near = ndimage.grey_dilation(pieces, size=(2 * int(NEAR_PX) + 1,) * 2)
+    r, c = np.nonzero(pieces)
+    mirrored = np.round(2 * axis[r] - c).astype(int)
+    inside = (mirrored >= 0) & (mirrored < width)
+    meets = np.zeros(len(r), bool)
+    meets[inside] = near[r[inside], mirrored[inside]] > 0
+    return set(np.unique(pieces[r[meets], c[meets]]).tolist())
 
 
 def standing_solid(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> Optional[StandingSolid]:
@@ -462,14 +496,15 @@ def standing_solid(mask: np.ndarray, K: np.ndarray, down: np.ndarray) -> Optiona
     found = None
     for fit in (revolution, upright_box):
         solid = fit(view)
-        if solid is None:
+        if solid is None or isinstance(solid, Revolution) and not solid.seen_turned():
             continue
         image, front, back = image_of(view, solid)
         share, target = overlap(view, image)
         if isinstance(solid, Revolution):
             for _ in range(AREA_ROUNDS):  # its pixels as many as the silhouette's, less a handle
                 area = math.sqrt(target.sum() / image.sum())
-                solid = Revolution(solid.axis_x, solid.edges, solid.radii * area, solid.ball and solid.ball * area)
+                solid = Revolution(solid.axis_x, solid.edges, solid.radii * area, solid.ball and solid.ball * area,
+                                   solid.top_face)
                 image, front, back = image_of(view, solid)
                 share, target = overlap(view, image)
         if share >= FIT_IOU and (found is None or share > found.overlap + ROUND_FIRST):

@@ -15,6 +15,7 @@ from scipy.spatial import ConvexHull
 from schemas.camera import pixel_rays
 from stages.reconstruct.closure import ball_depths, down_direction, object_depths
 from stages.reconstruct.depth import ObjectDepth
+from stages.reconstruct.standing import Revolution, standing_solid
 from stages.reconstruct.geometry import intrinsics_from_fov
 from testing.photographs import Capsule, TurnedBox, UprightCylinder, photograph, standing_axes
 
@@ -190,3 +191,27 @@ def test_a_standing_body_whose_base_is_hidden_stands_on_a_flat_cut(hidden_by):
     inside = -np.max(hull.equations[:, :2] @ np.array([centre_of_mass @ across, centre_of_mass @ along])
                      + hull.equations[:, 2])
     assert inside > 0.6 * radius
+
+
+LYING_OR_STANDING = {
+    "capsule lying across, level": (0.0, lambda pitch: Capsule(np.array([0.0, 0.0, 0.6]), np.array([0.08, 0.0, 0.0]), 0.04), False),
+    "capsule lying across": (20.0, lambda pitch: Capsule(np.array([0.0, 0.0, 0.6]), np.array([0.08, 0.0, 0.0]), 0.04), False),
+    "box lying across": (20.0, lambda pitch: TurnedBox(np.array([0.0, 0.0, 0.6]), np.array([0.1, 0.035, 0.04]),
+                                                       axes=standing_axes(pitch)), False),
+    "upright cylinder": (20.0, lambda pitch: UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(pitch), 0.05, 0.14), True),
+    "squat cylinder": (20.0, lambda pitch: UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(pitch), 0.08, 0.06), True),
+}
+
+
+@pytest.mark.parametrize("name", list(LYING_OR_STANDING))
+def test_a_body_lying_across_the_picture_is_not_taken_for_a_body_of_revolution(name):
+    """A capsule (24 cm by 8 cm) and a box lying across the picture are not turned about the vertical (a
+    body of revolution would make them as deep as they are wide: a disc), level or seen from 20 degrees
+    above; an upright cylinder, tall or squat (16 cm across, 6 cm tall, its top's rim traced), is. Level,
+    the capsule was a disc, its image overlapping the silhouette by 0.97."""
+    pitch, make, turned = LYING_OR_STANDING[name]
+    width, height = 320, 240
+    K = intrinsics_from_fov(40, width, height)
+    mask = photograph(make(pitch), K, np.eye(4), width, height).mask
+    solid = standing_solid(mask, K, down_direction(pitch))
+    assert (solid is not None and isinstance(solid.solid, Revolution)) == turned
