@@ -30,8 +30,9 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, grain_colours, grain_offsets, grain_relief,
-                       grain_shapes, hidden_at_rest, lattice_spacing, lit_caps, rest_ray_colours, surface_under)
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, crevices, grain_colours, grain_offsets,
+                       grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps, rest_ray_colours,
+                       surface_under)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -64,7 +65,9 @@ class Particles(NamedTuple):
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
     relief (P,) how much a grain of sand or snow is lit from above once its material flows
-    (interior.grain_relief; 0 for the other materials).
+    (interior.grain_relief; 0 for the other materials); granular (P,) 1 for a grain of sand or snow (of an
+    object with a lattice), which shows a shadowed crevice under it once its material flows
+    (interior.crevices), else 0.
     """
 
     rest_means: torch.Tensor
@@ -81,6 +84,7 @@ class Particles(NamedTuple):
     rest_normals: torch.Tensor
     surface: torch.Tensor
     relief: torch.Tensor
+    granular: torch.Tensor
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(P, 3) drawn positions (m), (P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,)
@@ -146,7 +150,8 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
         rest_normals=torch.cat([normals, normals[under]]),
         surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
-        relief=t(grain_relief(shaded_grains, trajectories.material_id)))
+        relief=t(grain_relief(shaded_grains, trajectories.material_id)),
+        granular=(t(granular) & spacing.isfinite()).to(opacities.dtype))
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
@@ -170,13 +175,17 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
-            # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body
+            # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body,
+            # over the shadowed crevice under it
             bodies, cap_means, cap_covariances, cap_opacities, cap_colors = lit_caps(
                 means, covariances, opacities, colors, particles.relief * particles.mixing.so_far, camera)
+            crevice_means, crevice_covariances, crevice_opacities, crevice_colors = crevices(
+                means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
             features = torch.cat([torch.cat([bodies, surface_weights[:, None].to(colors.dtype)], 1),
-                                  torch.nn.functional.pad(cap_colors, (0, 1))])
-            render = splat.rasterize(torch.cat([means, cap_means]), torch.cat([opacities, cap_opacities]), features,
-                                     camera, covariances=torch.cat([covariances, cap_covariances]))
+                                  torch.nn.functional.pad(torch.cat([cap_colors, crevice_colors]), (0, 1))])
+            render = splat.rasterize(torch.cat([means, cap_means, crevice_means]),
+                                     torch.cat([opacities, cap_opacities, crevice_opacities]), features, camera,
+                                     covariances=torch.cat([covariances, cap_covariances, crevice_covariances]))
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA

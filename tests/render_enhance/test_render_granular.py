@@ -20,8 +20,8 @@ from schemas.scene import PhysicsConfig
 from schemas.solid import solid_fields
 from stages.enhance.compositing import blend_over_background, unpremultiply
 from stages.enhance.flow import enhance_frames
-from stages.render.interior import (EDGE_PX, GRAIN_SHADE, grain_colours, grain_offsets, grain_relief, grain_shapes,
-                                    lit_caps, rest_ray_colours)
+from stages.render.interior import (CREVICE_SHADE, EDGE_PX, GRAIN_SHADE, crevices, grain_colours, grain_offsets,
+                                    grain_relief, grain_shapes, lit_caps, rest_ray_colours)
 from stages.render.render import render_camera, render_video, rendered_particles
 from stages.simulate.simulation import Simulation
 
@@ -261,3 +261,44 @@ def test_grains_show_no_lattice():
         assert peak(lattice + offsets) < 15, f"a lattice peak along {direction}"
     np.testing.assert_array_equal(grain_offsets(np.full(8, s), np.full(8, M.PRESETS.index("jelly"))), 0.0)
     np.testing.assert_array_equal(grain_offsets(np.full(8, np.inf), np.full(8, M.PRESETS.index("sand"))), 0.0)
+
+
+def test_a_grain_shades_the_gap_under_it():
+    """A grain of sand alone, seen from the side, drawn with its crevice (crevices): the crevice is the
+    grain's shape in the grain's colour times CREVICE_SHADE (the hue kept), composited behind the grain
+    (each pixel: the grain's alpha a1 times its colour plus (1 - a1) times the crevice's alpha a2 times
+    its colour, each rendered alone), and where it shows past the grain (the grain's alpha under 1/2, the
+    crevice's over 1/2) it lies under the grain, in the grain's own columns. A grain just under it at its
+    depth covers its crevice (the crevice sorts behind both). A grain whose material holds its shape
+    (weight 0) has none."""
+    colour = np.array([[0.8, 0.5, 0.2]])
+    sand = np.array([M.PRESETS.index("sand")])
+    size, focal, spacing = 201, 2000.0, 0.03
+    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
+    shape, opacity = grain_shapes(np.full(1, spacing ** 3), np.full(1, spacing), sand, np.ones(1))
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape), t(opacity), t(colour)
+    crevice = crevices(means, covariances, opacities, colours, t([1.0]), camera)
+    np.testing.assert_allclose(crevice[3].numpy(), CREVICE_SHADE * colour, rtol=1e-6)
+    alpha = lambda m, c, o: splat.rasterize(m, o, torch.ones(len(m), 1), camera,  # noqa: E731
+                                            covariances=c).alpha.numpy()[..., None]
+    a1, a2 = alpha(means, covariances, opacities), alpha(crevice[0], crevice[1], crevice[2])
+    both = splat.rasterize(torch.cat([means, crevice[0]]), torch.cat([opacities, crevice[2]]),
+                           torch.cat([colours, crevice[3]]), camera, covariances=torch.cat([covariances, crevice[1]]))
+    np.testing.assert_allclose(both.features.numpy(), a1 * colour + (1 - a1) * a2 * CREVICE_SHADE * colour,
+                               atol=0.01)
+    rows, cols = np.nonzero((a2[..., 0] > 0.5) & (a1[..., 0] < 0.5))
+    grain_rows = np.where(a1[..., 0] > 0.5, np.arange(size)[:, None], -1)
+    assert len(rows) > 20
+    assert (rows > grain_rows.max(0)[cols]).all() and (grain_rows.max(0)[cols] >= 0).all()  # rows grow downwards
+    # a grain just under it at the same depth, drawn with its own crevice, covers the first one's crevice
+    pair = torch.cat([means, means + t([[0.0, 0.6 * spacing, 0.0]])])
+    crevice = crevices(pair, covariances.repeat(2, 1, 1), opacities.repeat(2), colours.repeat(2, 1), t([1.0, 1.0]),
+                       camera)
+    two = splat.rasterize(torch.cat([pair, crevice[0]]), torch.cat([opacities.repeat(2), crevice[2]]),
+                          torch.cat([colours.repeat(2, 1), crevice[3]]), camera,
+                          covariances=torch.cat([covariances.repeat(2, 1, 1), crevice[1]]))
+    lower = alpha(pair[1:], covariances, opacities)[..., 0] > 0.98
+    assert lower.sum() > 100
+    np.testing.assert_allclose(two.features.numpy()[lower], 0.99 * np.tile(colour, (lower.sum(), 1)), atol=0.01)
+    assert len(crevices(means, covariances, opacities, colours, t([0.0]), camera)[0]) == 0
