@@ -28,7 +28,7 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
 from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
 from .shadow import Shadows
-from .unseen import Continuation, MirrorPlanes
+from .unseen import Continuation, MirrorPlanes, continue_inwards
 
 log = logging.getLogger("physmotion.enhance.flow")
 
@@ -63,6 +63,18 @@ def band_limited_upsample(image: np.ndarray, factor: int = OVERSAMPLING) -> np.n
     h, w = padded.shape[:2]
     fine = signal.resample(signal.resample(padded, h * factor, axis=0), w * factor, axis=1)
     return fine[PAD_PX * factor:(h - PAD_PX) * factor, PAD_PX * factor:(w - PAD_PX) * factor].astype(np.float32)
+
+
+def objects_continued(photo: np.ndarray, on_objects: np.ndarray) -> np.ndarray:
+    """(h, w, 3) float32: the photograph (h, w, 3) on its objects (on_objects (h, w) bool, output
+    resolution) and, beyond them, their colours continued outwards (unseen.continue_inwards): the copy
+    of it that the objects' colours are read from. The band-limited copy of a step rings (sinc ripples
+    decaying over tens of pixels), and the step from an object to its background is the photograph's
+    largest: read a quarter / half a pixel off, the clay example's smooth photograph, so copied, gained
+    4 / 7 times its high-frequency energy inside the object, and keeps it within 5 % with its colours
+    continued (the textured ball, cat and logo keep 0.94-1.0 of theirs either way)."""
+    continued = continue_inwards(photo.astype(np.float32), on_objects, np.ones(on_objects.shape, bool))
+    return np.where(on_objects[..., None], photo, continued).astype(np.float32)
 
 
 def photograph_at(fine_photo: np.ndarray, uv: np.ndarray) -> np.ndarray:
@@ -119,7 +131,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     T, h, w = coarse.alpha.shape
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
-    fine_photo = band_limited_upsample(photo)
+    on_objects = resize_to((gaussians.mask > 0).astype(np.float32), w, h) > 0.5
+    fine_photo = band_limited_upsample(objects_continued(photo, on_objects))
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
     planes = MirrorPlanes.of(gaussians)
