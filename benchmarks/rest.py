@@ -98,8 +98,9 @@ def main() -> None:
             particles), the largest travel of its centre of mass along the ground (mm and % of size_m), the
             largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball,
             coffee and clay are the example scenes (scenes/NAME); shuttle (the model shuttle at the right of
-            scikit-image's astronaut, box [352, 0, 470, 290], 0.3 m) and cat (chelsea's head, box [20, 0, 400,
-            300], 0.15 m) are photographs new to the project, as a new user writes them. Every folder is
+            scikit-image's astronaut, box [352, 0, 470, 290], 0.3 m), cat (chelsea's head, box [20, 0, 400,
+            300], 0.15 m) and rocket (scikit-image's rocket on its pad, box [296, 120, 348, 410], 0.3 m) are
+            photographs new to the project, as a new user writes them. Every folder is
             reconstructed by `pm-reconstruct --scene DIR/NAME/scene.yaml --out results/NAME/gaussians.h5` at
             the commit named and measured with `--scenes-dir DIR`.""",
             invocation(__file__), columns, rows, merge_on=2)

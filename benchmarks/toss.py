@@ -95,10 +95,11 @@ def main() -> None:
             largest turn of the body (best rigid fit of all particles), the largest rise of its total energy
             (kinetic + potential, the trajectories' diagnostics) above its value at the first frame after the
             toss, as a share of the toss's kinetic energy, substeps and seconds. Targets: 2 % of size_m, 3
-            degrees, 2 %. ball is the example scene; cat, shuttle and coin are scikit-image's chelsea (the
-            head, jelly), astronaut (the model shuttle, jelly) and coins (the large coin at the right, metal,
-            seen from 80 degrees above) as a new user writes them (benchmarks/scenes/, photographs by make_photos.py). Each
-            scene's own material is jelly but the coin's, so its `scene's` rows are its jelly rows. A jelly
+            degrees, 2 %. ball is the example scene; cat, rocket, shuttle and coin are scikit-image's chelsea
+            (the head, jelly), rocket (a 30 cm model standing on its pad, jelly of 5 MPa), astronaut (the model
+            shuttle, jelly) and coins (the large coin at the right, metal, seen from 80 degrees above) as a new
+            user writes them (benchmarks/scenes/, photographs by make_photos.py). Each scene's own material is
+            jelly but the coin's, so its `scene's` rows are its jelly rows. A jelly
             that bounces turns by the lever between its contact and its centre of mass, which the
             reconstructed shape sets (docs/decisions/0029-toss-spin-is-the-body-s.md).""",
             invocation(__file__), columns, rows, merge_on=3)
