@@ -462,26 +462,30 @@ SECTIONS = {
                  half second as in the enhance section, and the enhanced frames' over the coarse render's.""",
                  ["Targets (issue 31): each share within 40 % of its share at frame 0; sharpness ratio at least "
                   "0.6.",
-                  "The shares follow the sand, not the render: the logo's heap shows the colours of its particles "
-                  "in front within 1 point, and 87 % of its visible pixels come from the top 30 % of the body at "
-                  "rest (its top, mostly orange, falls over the heap's face). The wheel's near-black pixels (41 % "
-                  "of its heap) have no stable chromaticity: there the render's class and the particles' agree on "
-                  "87 % of the pixels, on 97-98 % of the others. The shuttle (white orbiter, brown tank) keeps "
-                  "both colours within the target: its tank spreads over the heap's top, the orbiter's white "
-                  "lines its front.",
+                  "Why the logo's heap fills the picture (decision 0037): the symmetric prior sweeps the "
+                  "silhouette's medial balls, so the flat logo's disc is a ball of sand, 0.30 x 0.30 x 0.30 m, "
+                  "0.0141 m^3. It spreads to 0.64 x 0.12 x 0.64 m, evenly about its centre (camera z 0.31-0.95 m "
+                  "about 0.63 m): its front comes to 0.31 m from the camera, half the body's distance, where a "
+                  "grain of the lattice spacing (9.5 mm) is 15 px, not 8. The same reconstruction squashed to a "
+                  "3 cm disc (0.0014 m^3), filled from its Gaussians and simulated with the scene's physics, "
+                  "heaps 0.49 x 0.05 x 0.18 m, all in the picture, its nearest grains 8.7 px: shares 41 % / 59 % "
+                  "-> 53 % / 47 % (change 29 %), sharpness ratio 1.27 (coarse render). The wheel is a 0.27 m deep "
+                  "block whose heap reaches the camera's plane; the shuttle, 0.09 m deep, heaps within the "
+                  "picture.",
+                  "The shares follow the sand, not the render: each heap shows the colours of its particles in "
+                  "front within 2 (logo) and 4 (shuttle) points. The wheel's near-black pixels have no stable "
+                  "chromaticity (its box holds the photograph's black corners).",
                   "The sharpness ratio against the photograph measures the photograph: 77 % of the logo "
                   "photograph's Laplacian variance lies in 5 % of its pixels (ink lines, the white band), and the "
                   "wheel's photograph is a smooth gradient. The flow backend keeps the grains pm-render draws "
-                  "(enhanced over coarse). Yet scikit-image's gravel photograph, scaled to the logo heap's grain "
-                  "(9.6 px) and brightness, scores 6.5 against the logo photograph: the heap has a twentieth of "
-                  "gravel's contrast at the grain's scale (no dark gaps between its grains).",
-                  "Grains lit from above (interior.lit_caps, decision 0023), before and after on the same "
-                  "trajectories: logo sharpness ratio 0.28 before, 0.36 after (enhanced over coarse 1.09, 1.06); "
-                  "wheel 285 before, 354 after (1.00, 1.00); shares unchanged (logo 68 % / 32 %, wheel 16 % / 84 % "
-                  "before, 17 % / 83 % after).",
-                  "The logo: results/logo's gaussians.h5 and trajectories.h5 (make demo) rendered by this commit "
-                  "into --results; the wheel and the shuttle: pm-reconstruct, pm-simulate, pm-render and "
-                  "pm-enhance of benchmarks/scenes/NAME into --new-results.",
+                  "(enhanced over coarse).",
+                  "Crevices under the grains (interior.crevices, decision 0037), without and with, on the same "
+                  "trajectories (6 frames rendered, coarse over photograph): logo 0.33 -> 0.39, shuttle 14.7 -> "
+                  "14.5, wheel 183 -> 165; shares unchanged (logo 70 % / 30 %, shuttle 66 % / 34 %, wheel 86 % / "
+                  "14 %).",
+                  "Each scene (scenes/logo; benchmarks/scenes/wheel, shuttle_sand) run by pm-reconstruct, "
+                  "pm-simulate, pm-render and pm-enhance at this commit into --results and --new-results "
+                  "(results/logo's gaussians.h5, 19001 Gaussians, no longer matches its trajectories.h5, 19039).",
                   "On tests/render_enhance/test_render_granular.py's log seen end-on (front half orange half "
                   "green, its unseen side green): orange 50 % at frame 0, 15 % of the heap with the colour of "
                   "the nearest surface Gaussian (before decision 0023), 49 % with the rest-ray colour."]),
