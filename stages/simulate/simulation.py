@@ -38,9 +38,9 @@ log = logging.getLogger("physmotion.simulate")
 # (elastic wave + conditions + free fall over the whole run) means the explicit
 # integration has blown up.
 BLOW_UP_FACTOR = 10.0
-# A frame in which every body is carried and no particle moved more than this share of a cell, nor
-# more than in the frame before, is at rest: while no condition acts, the next frame is the same
-# (docs/decisions/0021-frames-at-rest.md).
+# A frame in which every body is carried and no particle that carries mass moved more than this share of
+# a cell, nor more than in the frame before, is at rest: while no condition acts, the next frame is the
+# same (docs/decisions/0021-frames-at-rest.md, 0034-rest-judged-on-mass.md).
 QUIET_CELLS = 0.05
 # The settle says how far it has come this often, in seconds.
 SETTLE_LOG_EVERY_S = 10.0
@@ -110,6 +110,7 @@ class Simulation:
         density = np.array([m.density for m in self.materials])
         self.masses = density[self.object_id] * self.volumes
         self.material_id = np.array([PRESETS.index(m.preset) for m in self.materials])[self.object_id]
+        self._carries_mass = self.masses > 0  # the massless Gaussians ride on the grid velocity of these
 
         self.rest_sim = rest_sim = self.rest_world @ self.Q.T
         self._size = float(np.max(rest_sim.max(0) - rest_sim.min(0)))
@@ -451,7 +452,10 @@ class Simulation:
         setting out); and no condition acts, starts or ends between frame f - 1 and frame f + 1 (a fixed one
         holds still what it holds). A body slow at the top of its flight is not at rest: nothing carries it.
         The particles' speeds are not asked: a stiff body's surface particles jitter at centimetres a second
-        over fractions of a millimetre."""
+        over fractions of a millimetre. Only the particles that carry mass are asked how far they moved: the
+        massless Gaussians push nothing and follow the grid's velocity about them, and a few of them at a
+        contact, their stencils half below the ground, slide along it by a fit of the nodes beside them
+        while the body stands (docs/decisions/0034-rest-judged-on-mass.md)."""
         if f < 2:
             return False
         if np.linalg.norm(self.gravity_world) > 0:
@@ -472,8 +476,9 @@ class Simulation:
             if c.type not in ("fixed", "impulse") and c.start_s <= until and (c.end_s is None or c.end_s > since):
                 return False
         quiet = QUIET_CELLS * self.grid.dx
-        moved = float(np.max(np.abs(positions[f] - positions[f - 1]), initial=0.0))
-        before = float(np.max(np.abs(positions[f - 1] - positions[f - 2]), initial=0.0))
+        heavy = self._carries_mass
+        moved = float(np.max(np.abs(positions[f, heavy] - positions[f - 1, heavy]), initial=0.0))
+        before = float(np.max(np.abs(positions[f - 1, heavy] - positions[f - 2, heavy]), initial=0.0))
         return moved <= quiet and moved <= before
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:

@@ -22,7 +22,7 @@ from stages.reconstruct.lift import lift_object
 from stages.simulate import quasi_static, rest_state
 from stages.simulate.simulation import Simulation
 from testing.photographs import Capsule, UprightCylinder, photograph, standing_axes
-from testing.particles import box_surface, fibonacci_sphere
+from testing.particles import box_surface, fibonacci_sphere, sphere_solid
 
 G = 9.81
 SIZE = 0.1
@@ -374,3 +374,24 @@ def test_frames_at_rest_cost_no_substeps_until_a_condition_acts(device):
     np.testing.assert_array_equal(tr.positions[4], tr.positions[3])
     travel = centre_of_mass(tr)[:, 0] - centre_of_mass(tr)[5, 0]
     np.testing.assert_allclose(travel[6:], 0.5 * (tr.time_s[6:] - 0.5), rtol=0.05)
+
+
+def test_rest_is_judged_on_the_particles_that_carry_mass():
+    """A 10 cm jelly ball's solid on the ground, its Gaussians massless on its surface: a frame in which the
+    solid moved 2 % of a cell and 1 % in the next is at rest even where one Gaussian slid half a cell in
+    each (a massless Gaussian pushes nothing: at a contact the fit of the nodes beside it slides it along
+    the ground while the body stands, docs/decisions/0034-rest-judged-on-mass.md); where one particle of
+    the solid slid half a cell instead, it is not."""
+    centre, radius = np.array([0.0, 0.0, 0.5]), 0.05
+    means = centre + fibonacci_sphere(300, radius)
+    sim = Simulation(PhysicsConfig(duration_s=0.5, fps=10, grid=20), [M.Jelly(youngs_modulus=5e4)], means,
+                     np.zeros(len(means), int), solids=[sphere_solid(centre, radius)])
+    times = np.arange(sim.n_frames) / sim.physics.fps
+    step = np.zeros_like(sim.rest_world)
+    step[:, 0] = sim.grid.dx
+    assert np.all(sim.masses[:len(means)] == 0.0)
+    for mover, at_rest in ((0, True), (len(means), False)):  # a Gaussian; the first particle of the solid
+        slide = np.zeros_like(step)
+        slide[mover] = 0.5 * step[mover]
+        positions = np.cumsum([sim.rest_world, 0.02 * step + slide, 0.01 * step + slide], axis=0)
+        assert sim._at_rest(2, positions, times) == at_rest
