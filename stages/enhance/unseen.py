@@ -309,8 +309,8 @@ class Continuation:
             seen: (h, w) in [0, 1], how much of each pixel's surface the photograph saw.
             rendered: (h, w, 3) the render's colour, sRGB in [0, 255].
             surface: (h, w) in [0, 1], how surely the render shows the object's surface, carried smoothly
-                from the photograph (the trusted source_coherence): the render's colour gives way to the
-                continued one only there, never where it shows the interior, grains or tumbling material.
+                from the photograph (the trusted source_coherence): only there is the render re-lit or gives
+                way to the continued colour, never where it shows the interior, grains or tumbling material.
             unseen_from_photo: the unseen surfaces' render gives way to the continued colour too
                 (enhance.hidden_surfaces "photo"); else only the seen ones' does.
         """
@@ -330,11 +330,13 @@ class Continuation:
         # where it recorded that source well; at its limb they are the Gaussians' compromise with the
         # background beyond (re-lit by the limb's shading, the ambient alone, they would be light specks
         # along the seam): there the colour continued from the surface recorded well takes their place,
-        # and beyond its reach they are not re-lit
+        # and beyond its reach they are not re-lit. Where the render shows what the source map does not
+        # carry (the interior, grains, a jumbled map) neither happens: the shading its source had is not
+        # known, and the render, drawn from the particles, is the only record of it
         recorded = s * sample_at(self.albedo.recorded, uv) + (1 - s) * sample_at(self.albedo.recorded, mirrored_uv)
         recorded = np.where(np.isfinite(uv[..., 0]), recorded, 1.0)[..., None]
         gain = np.clip(shading_now / np.maximum(then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)
-        gain = 1 + recorded * (np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None] - 1)
+        gain = 1 + recorded * surface[..., None] * (np.where(np.isfinite(uv[..., 0]), gain, 1.0)[..., None] - 1)
         continued = ((1 - recorded) * surface[..., None]
                      * (inside if unseen_from_photo else s * inside)[..., None])
         relit_render = (1 - continued) * to_linear(rendered) * gain + continued * colour
