@@ -45,6 +45,10 @@ class ObjectConfig(_Strict):
                                   "(pm-setup paints it)")
     size_m: float = Field(0.25, ge=0.01, le=1000, description="largest extent of the object in metres (1 cm to "
                           "1 km: a smaller object would stand nearer than splat's near plane, 1 cm from the camera)")
+    thickness_m: Optional[float] = Field(None, ge=0.001, le=1000, description="thickness of a flat object (a printed "
+                                         "logo, a coin, a slab) across the view, metres: its body is cut to a slab "
+                                         "that thick about its middle; none: the silhouette alone shapes it, which "
+                                         "makes a disc a ball")
     material: Material = Field(default_factory=Jelly, description="material preset and its keys")
 
     @model_validator(mode="after")
@@ -459,7 +463,9 @@ def stage_keys(scene: Scene, stage: str) -> dict:
     data = _relative_paths(scene.model_dump(mode="json"), str(scene.folder))
     if stage == "reconstruct":
         # hints only where given: a scene without hints hashes as if the key did not exist, so its results stay current
+        # thickness only where given, likewise
         objs = [{k: o[k] for k in ("mask", "box", "size_m")} | ({"hints": o["hints"]} if o["hints"] else {})
+                | ({"thickness_m": o["thickness_m"]} if o["thickness_m"] is not None else {})
                 for o in data["objects"]]
         # prior only where not the default, likewise: results made before the key existed stay current
         reconstruct = {k: v for k, v in data["reconstruct"].items() if k != "prior" or v != "symmetric"}

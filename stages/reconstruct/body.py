@@ -2,7 +2,7 @@
 
 The closure (closure.object_depths) takes a body for each object: a standing solid (a body of revolution
 about the vertical or an upright box), the union of its medial balls, or both (a cup and the balls of its
-handle), cut flat where it stands. `Body` evaluates that body's signed distance exactly at any point, and
+handle), cut to a slab where the scene gives its thickness (Slab), cut flat where it stands. `Body` evaluates that body's signed distance exactly at any point, and
 `sample` lays it on a grid aligned with gravity whose middle node lies on the body's centre of volume
 (schemas.solid.SolidGrid), so a body symmetric about a vertical plane through its centre is sampled
 symmetrically, whatever the photograph's pixels.
@@ -68,6 +68,22 @@ class Standing:
         slab = np.clip(np.searchsorted(rev.edges, g[:, 1], side="right") - 1, held[0], held[-1])
         ends = np.maximum(top - g[:, 1], g[:, 1] - bottom)
         return self.scale * np.maximum(radial - rev.radii[slab], ends)
+
+
+@dataclass
+class Slab:
+    """A part (Balls, Standing) cut to a slab: its points within `half` m of the plane x . normal = middle
+    (normal (3,) unit, camera frame; middle m)."""
+
+    part: Balls | Standing
+    normal: np.ndarray
+    middle: float
+    half: float
+
+    def distance(self, points: np.ndarray) -> np.ndarray:
+        """(P,) signed distance in m of camera-frame points (P,3): the larger of the part's and the slab's (exact
+        outside where one of them is nearest, a lower bound at the slab's rim)."""
+        return np.maximum(self.part.distance(points), np.abs(points @ self.normal - self.middle) - self.half)
 
 
 @dataclass

@@ -31,7 +31,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from schemas.camera import pixel_rays
 
-from .body import Balls, Body, Standing
+from .body import Balls, Body, Slab, Standing
 from .depth import ObjectDepth, aligned_front, medial_balls
 from .standing import NEAR_PX, GravityView, StandingSolid, standing_solid
 
@@ -290,6 +290,31 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
     return t_in, t_out, solid.on_base, parts
 
 
+def cut_to_thickness(thickness: float, rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, parts: list,
+                     down: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
+    """The body between t_in and t_out (N,) along rays (N,3) (camera frame, z = 1), made of `parts`, cut to a
+    slab `thickness` m thick about its middle: (N,) t_in, (N,) t_out and the parts, each a body.Slab. The slab
+    lies across the view made horizontal (gravity along `down` (3,)), as the medial balls' plane does, or
+    across the view itself seen from above (STEEPEST_VERTICAL_PLANE); its middle is the body's centre of volume
+    along its normal. A ray whose part of the body misses the slab (at the outline) keeps a point, where its
+    chord comes nearest to the slab's middle plane."""
+    volume = np.where(np.isfinite(t_in) & np.isfinite(t_out), t_out ** 3 - t_in ** 3, 0.0)
+    mid = np.nan_to_num(0.5 * (t_in + t_out))
+    centre = (volume * mid) @ rays / volume.sum()
+    view = centre / np.linalg.norm(centre)
+    normal = view - (view @ down) * down
+    if np.linalg.norm(normal) < STEEPEST_VERTICAL_PLANE:
+        normal = view
+    normal = normal / np.linalg.norm(normal)
+    along = rays @ normal
+    middle = float(centre @ normal)
+    half = 0.5 * thickness
+    cut_in, cut_out = np.maximum(t_in, (middle - half) / along), np.minimum(t_out, (middle + half) / along)
+    missed = cut_in > cut_out
+    cut_in[missed] = cut_out[missed] = np.clip(middle / along, t_in, t_out)[missed]
+    return cut_in, cut_out, [Slab(part, normal, middle, half) for part in parts]
+
+
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
                  layer: float) -> tuple[np.ndarray, np.ndarray, float]:
     """The body between t_in and t_out (N,) along rays (N,3) (camera frame, z = 1), cut flat where it
@@ -370,11 +395,13 @@ def support_margin(points: np.ndarray, centre: np.ndarray) -> float:
 
 
 def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], pitch_deg: float,
-                  inverse_depth: Optional[np.ndarray] = None) -> list[ObjectDepth]:
+                  inverse_depth: Optional[np.ndarray] = None,
+                  thicknesses_m: Optional[Sequence[Optional[float]]] = None) -> list[ObjectDepth]:
     """Metric front and back camera z (H,W) of each object (labels k + 1), NaN off it: its standing solid
-    (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], cut
-    flat where it stands on the ground (standing_cut); and that body itself (ObjectDepth.body). With
-    ``inverse_depth`` (a depth model's, (H,W)) the front follows the model, aligned to the body's front."""
+    (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], cut to
+    a slab thicknesses_m[k] thick where that is given (cut_to_thickness: a flat object), cut flat where it
+    stands on the ground (standing_cut); and that body itself (ObjectDepth.body). With ``inverse_depth`` (a
+    depth model's, (H,W)) the front follows the model, aligned to the body's front."""
     down = down_direction(pitch_deg)
     out = []
     for k, size in enumerate(sizes_m):
@@ -388,6 +415,11 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
             t_in, t_out, on_solid_base, parts = solid_depths(mask, K, down, size, solid)
             log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k, solid.solid.kind,
                      solid.overlap)
+        thickness = thicknesses_m[k] if thicknesses_m is not None else None
+        if thickness is not None:
+            t_in, t_out, parts = cut_to_thickness(thickness, input_rays(mask, K), t_in, t_out, parts, down)
+            log.info("object %d: cut to a slab %.0f mm thick across the view (objects[%d].thickness_m)", k,
+                     1e3 * thickness, k)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
         layer = max(BASE_LAYER * size, 1.5 * float(np.median(t_in)) / K[0, 0])
         front[mask], back[mask], cut, lowest = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,

@@ -91,7 +91,8 @@ def prepare(scene: Scene, device: str = "cpu", sam_model: Optional[Path] = None,
              ", ".join(str(int((labels == k + 1).sum())) for k in range(len(specs))))
     background = inpaint_background(photo, labels)
     inverse_depth = DptDepth(depth_model, device).inverse_depth(photo) if depth_model is not None else None
-    depths = object_depths(labels, K, [o.size_m for o in scene.objects], scene.camera.pitch_deg, inverse_depth)
+    depths = object_depths(labels, K, [o.size_m for o in scene.objects], scene.camera.pitch_deg, inverse_depth,
+                           [o.thickness_m for o in scene.objects])
     for k, d in enumerate(depths):
         log.info("object %d: front depth %.3f-%.3f m, back up to %.3f m", k, np.nanmin(d.front),
                  np.nanmax(d.front), np.nanmax(d.back))

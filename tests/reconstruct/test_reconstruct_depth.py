@@ -111,3 +111,32 @@ def test_the_volume_between_front_and_back_is_the_balls(height, width):
     # a 20 px silhouette's medial axis is a cluster of points, whose discs cover it at radii 5 % short
     tolerance = 0.15 if width < 100 else 0.05
     assert object_depths(mask.astype(np.uint8), K, [2 * radius_m], 0.0)[0].volume(K) == pytest.approx(ball, rel=tolerance)
+
+
+def test_a_flat_object_is_cut_to_its_thickness():
+    """A disc photographed face-on (a ball's silhouette) with thickness_m t: its body is the ball of the
+    silhouette cut to a slab t thick about its middle, across the view. Along every ray the body is at most
+    t / cos thick (the ray's angle to the slab's normal, here the view axis made horizontal); the volume
+    between front and back is the ball's slab, pi (2 a r^2 - 2 a^3 / 3) with a = t / 2, to the prior's own 5 %;
+    every point inside the body's signed distance lies within t / 2 of the slab's middle plane. Without the
+    key the body is the ball, as before."""
+    height, width, radius_m, thickness = 96, 128, 0.15, 0.03
+    K = intrinsics_from_fov(40, width, height)
+    rays = pixel_rays(K, height, width)
+    _, mask = sphere_hits(rays, np.array([0.05, -0.02, 1.0]), radius_m)
+    labels = mask.astype(np.uint8)
+    ball = object_depths(labels, K, [2 * radius_m], 0.0)[0]
+    same = object_depths(labels, K, [2 * radius_m], 0.0, thicknesses_m=[None])[0]
+    np.testing.assert_array_equal(same.back, ball.back)
+    flat = object_depths(labels, K, [2 * radius_m], 0.0, thicknesses_m=[thickness])[0]
+    normal = flat.body.parts[0].normal
+    z_rays = rays[mask] / rays[mask][:, 2:3]
+    along = z_rays @ normal
+    assert ((flat.back[mask] - flat.front[mask]) * along <= thickness + 1e-9).all()
+    a = thickness / 2
+    assert flat.volume(K) == pytest.approx(np.pi * (2 * a * radius_m ** 2 - 2 * a ** 3 / 3), rel=0.05)
+    points = np.random.default_rng(0).uniform(-1, 1, (20000, 3)) * [0.2, 0.2, 0.2] + [0.05, -0.02, 1.0]
+    inside = flat.body.distance(points) < 0
+    assert inside.sum() > 100
+    middle = flat.body.parts[0].middle
+    assert np.abs(points[inside] @ normal - middle).max() <= a + 1e-9
