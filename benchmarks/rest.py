@@ -99,7 +99,8 @@ def main() -> None:
             largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball,
             coffee and clay are the example scenes (scenes/NAME); shuttle (the model shuttle at the right of
             scikit-image's astronaut, box [352, 0, 470, 290], 0.3 m), cat (chelsea's head, box [20, 0, 400,
-            300], 0.15 m) and rocket (scikit-image's rocket on its pad, box [296, 120, 348, 410], 0.3 m) are
+            300], 0.15 m), rocket (scikit-image's rocket on its pad, box [296, 120, 348, 410], 0.3 m) and coin
+            (scikit-image's coins, the large coin at the right, 3 cm of metal seen from 80 degrees above) are
             photographs new to the project, as a new user writes them. Every folder is
             reconstructed by `pm-reconstruct --scene DIR/NAME/scene.yaml --out results/NAME/gaussians.h5` at
             the commit named and measured with `--scenes-dir DIR`.""",
