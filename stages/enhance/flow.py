@@ -19,6 +19,7 @@ object wherever it still stands as at rest (compositing.Backdrop).
 from __future__ import annotations
 
 import logging
+from typing import Callable
 
 import cv2
 import numpy as np
@@ -67,12 +68,7 @@ def band_limited_upsample(image: np.ndarray, factor: int = OVERSAMPLING) -> np.n
 
 def objects_continued(photo: np.ndarray, on_objects: np.ndarray) -> np.ndarray:
     """(h, w, 3) float32: the photograph (h, w, 3) on its objects (on_objects (h, w) bool, output
-    resolution) and, beyond them, their colours continued outwards (unseen.continue_inwards): the copy
-    of it that the objects' colours are read from. The band-limited copy of a step rings (sinc ripples
-    decaying over tens of pixels), and the step from an object to its background is the photograph's
-    largest: read a quarter / half a pixel off, the clay example's smooth photograph, so copied, gained
-    4 / 7 times its high-frequency energy inside the object, and keeps it within 5 % with its colours
-    continued (the textured ball, cat and logo keep 0.94-1.0 of theirs either way)."""
+    resolution) and, beyond them, their colours continued outwards (unseen.continue_inwards)."""
     continued = continue_inwards(photo.astype(np.float32), on_objects, np.ones(on_objects.shape, bool))
     return np.where(on_objects[..., None], photo, continued).astype(np.float32)
 
@@ -81,6 +77,38 @@ def photograph_at(fine_photo: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """(h', w', 3) float32 in [0, 255]: the photograph at image points uv (h', w', 2, output
     resolution), read from its band-limited copy (:func:`band_limited_upsample`) by Lanczos."""
     return np.clip(sample_at(fine_photo, uv, cv2.INTER_LANCZOS4, OVERSAMPLING), 0, 255)
+
+
+SILHOUETTE_PX = 2.0
+"""Depth (output pixels) inside the objects' mask over which the objects' colours go from the photograph's
+own copy (on the silhouette) to the copy of the objects continued beyond it (:func:`objects_reader`)."""
+
+
+def objects_reader(photo: np.ndarray, on_objects: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    """photograph_at for the objects' colours: image points uv (h', w', 2) -> (h', w', 3) float32 sRGB.
+
+    The band-limited copy of a step rings (sinc ripples decaying over tens of pixels), and the step from
+    an object to its background is the photograph's largest: read a quarter / half a pixel off the grid,
+    the clay example's smooth photograph gained 4 / 7 times its high-frequency energy inside the object.
+    Inside the objects the colours are read from the copy of the photograph whose background is the
+    objects' colours continued (:func:`objects_continued`), which holds no silhouette: the clay keeps its
+    energy within 5 %, the textured ball, cat and logo keep 0.94-1.0 of theirs either way. On and beyond
+    the silhouette, and over SILHOUETTE_PX inside it, the photograph's own copy takes over, so that every
+    pixel is read exactly on the grid (frame 0 is the photograph, its silhouette's pixels included).
+
+    Args:
+        photo: (h, w, 3) the photograph at output resolution; on_objects: (h, w) bool, its objects' mask.
+    """
+    plain = band_limited_upsample(photo)
+    objects = band_limited_upsample(objects_continued(photo, on_objects))
+    depth = cv2.distanceTransform(on_objects.astype(np.uint8), cv2.DIST_L2, 5) - 0.5  # px from the edge
+    inside = np.clip(depth / SILHOUETTE_PX, 0.0, 1.0).astype(np.float32)
+
+    def read(uv: np.ndarray) -> np.ndarray:
+        weight = sample_at(inside, uv)[..., None]
+        return weight * photograph_at(objects, uv) + (1 - weight) * photograph_at(plain, uv)
+
+    return read
 
 
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
@@ -131,13 +159,11 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     T, h, w = coarse.alpha.shape
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
-    on_objects = resize_to((gaussians.mask > 0).astype(np.float32), w, h) > 0.5
-    fine_photo = band_limited_upsample(objects_continued(photo, on_objects))
+    read_objects = objects_reader(photo, resize_to((gaussians.mask > 0).astype(np.float32), w, h) > 0.5)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
     planes = MirrorPlanes.of(gaussians)
-    continuation = Continuation.fit(coarse, gaussians, photo, coverage, lambda uv: photograph_at(fine_photo, uv),
-                                    relight, planes)
+    continuation = Continuation.fit(coarse, gaussians, photo, coverage, read_objects, relight, planes)
     if ground:
         relighting = continuation.relighting
         shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None, planes)
