@@ -28,7 +28,7 @@ import warp as wp
 
 from .constitutive import FRACTURE, MaterialParams
 from .state import Cracks, GridNodes, Particles
-from .stencil import quadratic_weights, stencil_base
+from .stencil import stencil_base, stencil_weights
 
 
 @wp.kernel
@@ -42,13 +42,11 @@ def damage_to_grid(materials: wp.array(dtype=MaterialParams), particles: Particl
         damage = particles.history[p]
     mass = particles.mass
     base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
-    wx = quadratic_weights(fx[0])
-    wy = quadratic_weights(fx[1])
-    wz = quadratic_weights(fx[2])
+    weights = stencil_weights(fx)
     for i in range(3):
         for j in range(3):
             for k in range(3):
-                w = wx[i] * wy[j] * wz[k]
+                w = weights[0, i] * weights[1, j] * weights[2, k]
                 wp.atomic_add(cracks.node_damage_mass, base[0] + i, base[1] + j, base[2] + k,
                               w * wp.vec2(mass[p] * damage, mass[p]))
                 wp.atomic_max(cracks.node_max_damage, base[0] + i, base[1] + j, base[2] + k, damage)
@@ -62,16 +60,14 @@ def damage_gradient(start: int, particles: Particles, grid: GridNodes, cracks: C
         return
     dx = grid.dx
     base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / dx, grid.shape)
-    wx = quadratic_weights(fx[0])
-    wy = quadratic_weights(fx[1])
-    wz = quadratic_weights(fx[2])
+    weights = stencil_weights(fx)
     g = wp.vec3(0.0)
     for i in range(3):
         for j in range(3):
             for k in range(3):
                 node = cracks.node_damage_mass[base[0] + i, base[1] + j, base[2] + k]
                 offset = dx * (wp.vec3(float(i), float(j), float(k)) - fx)
-                g += (wx[i] * wy[j] * wz[k] * node[0] / node[1]) * offset
+                g += (weights[0, i] * weights[1, j] * weights[2, k] * node[0] / node[1]) * offset
     cracks.gradient[p] = (4.0 / (dx * dx)) * g
 
 

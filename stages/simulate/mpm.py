@@ -41,7 +41,7 @@ import warp as wp
 from .constitutive import initial_history, params_array, update_stress
 from .crack_fields import CrackFields, breaks, crack_contact, crack_field
 from .state import Cracks, GridNodes, Particles, Step
-from .stencil import quadratic_weights, stencil_base
+from .stencil import stencil_base, stencil_weights
 
 # Nodes this close to a domain face form the wall layer; particles are kept
 # this far inside, so a quadratic stencil never leaves the grid.
@@ -95,9 +95,7 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         dt = substep.dt
         inv_dx = 1.0 / dx
         base, fx = stencil_base(particles.x[p], grid.origin, inv_dx, grid.shape)
-        wx = quadratic_weights(fx[0])
-        wy = quadratic_weights(fx[1])
-        wz = quadratic_weights(fx[2])
+        weights = stencil_weights(fx)
         m = particles.mass[p]
         # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
         affine = m * particles.C[p] - (4.0 * dt * inv_dx * inv_dx) * particles.volume_stress[p]
@@ -110,10 +108,10 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
             momentum_i = corner + float(i) * step[0]
             for j in range(3):
                 momentum_ij = momentum_i + float(j) * step[1]
-                w_ij = wx[i] * wy[j]
+                w_ij = weights[0, i] * weights[1, j]
                 for k in range(3):
                     momentum = momentum_ij + float(k) * step[2]
-                    w = w_ij * wz[k]
+                    w = w_ij * weights[2, k]
                     field = int(0)
                     if wp.static(n_fields == 2):
                         node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
@@ -275,9 +273,7 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         d_sum = wp.vec3(0.0)
         vd = wp.mat33(0.0)  # sum of w m v (x_i - x_p)^T
         dd = wp.mat33(0.0)  # sum of w m (x_i - x_p)(x_i - x_p)^T
-        wx = quadratic_weights(fx[0])
-        wy = quadratic_weights(fx[1])
-        wz = quadratic_weights(fx[2])
+        weights = stencil_weights(fx)
         for i in range(3):
             for j in range(3):
                 for k in range(3):
@@ -286,7 +282,7 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
                         field = (field_bits >> (9 * i + 3 * j + k)) & 1
                     a = float(0.0)
                     if mass[field, base[0] + i, base[1] + j, base[2] + k] > 0.0:
-                        a = wx[i] * wy[j] * wz[k]
+                        a = weights[0, i] * weights[1, j] * weights[2, k]
                     v = velocity[field, base[0] + i, base[1] + j, base[2] + k]
                     d = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
                     weight += a
@@ -328,20 +324,18 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         shape = grid.shape
         inv_dx = 1.0 / dx
         base, fx = stencil_base(particles.x[p], origin, inv_dx, shape)
-        wx = quadratic_weights(fx[0])
-        wy = quadratic_weights(fx[1])
-        wz = quadratic_weights(fx[2])
+        weights = stencil_weights(fx)
         vp = wp.vec3(0.0)
         Cp = wp.mat33(0.0)
         if particles.mass[p] <= 0.0:
             vp, Cp = gather_massless(velocity, grid.mass, cracks.field_bits[p], base, fx, dx, particles.v[p])
         else:
             # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
-            ox = wp.cw_mul(wx, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
-            oy = wp.cw_mul(wy, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
-            oz = wp.cw_mul(wz, wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
+            ox = wp.cw_mul(weights[0], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
+            oy = wp.cw_mul(weights[1], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
+            oz = wp.cw_mul(weights[2], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
             # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
-            # wx wy wz, so both sums are taken one axis at a time (k, then j, then i)
+            # weights[0, i] weights[1, j] weights[2, k], so both sums are taken one axis at a time (k, then j, then i)
             Bx = wp.vec3(0.0)
             By = wp.vec3(0.0)
             Bz = wp.vec3(0.0)
@@ -357,15 +351,15 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
                         if wp.static(n_fields == 2):
                             field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
                         vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
-                        v_ij += wz[k] * vi
+                        v_ij += weights[2, k] * vi
                         vz_ij += oz[k] * vi
-                    v_i += wy[j] * v_ij
+                    v_i += weights[1, j] * v_ij
                     vy_i += oy[j] * v_ij
-                    vz_i += wy[j] * vz_ij
-                vp += wx[i] * v_i
+                    vz_i += weights[1, j] * vz_ij
+                vp += weights[0, i] * v_i
                 Bx += ox[i] * v_i
-                By += wx[i] * vy_i
-                Bz += wx[i] * vz_i
+                By += weights[0, i] * vy_i
+                Bz += weights[0, i] * vz_i
             Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
         if particles.prescribed[p] != 0:
             vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid

@@ -20,3 +20,10 @@ def stencil_base(x: wp.vec3, origin: wp.vec3, inv_dx: float, shape: wp.vec3i):
 def quadratic_weights(fx: float):
     """Quadratic B-spline weights of the three nodes at distances fx, fx - 1, fx - 2 (cells)."""
     return wp.vec3(0.5 * (1.5 - fx) * (1.5 - fx), 0.75 - (fx - 1.0) * (fx - 1.0), 0.5 * (fx - 0.5) * (fx - 0.5))
+
+
+@wp.func
+def stencil_weights(fx: wp.vec3):
+    """The 3x3x3 stencil's quadratic B-spline weights at fx (cells from its corner node, stencil_base), one row
+    per axis: node (i, j, k) of the stencil weighs w[0, i] w[1, j] w[2, k], and the weights sum to 1."""
+    return wp.matrix_from_rows(quadratic_weights(fx[0]), quadratic_weights(fx[1]), quadratic_weights(fx[2]))
