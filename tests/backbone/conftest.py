@@ -1,10 +1,20 @@
-"""Helpers for the backbone tests: tiny scene folders made on the fly."""
+"""Helpers for the backbone tests: tiny scene folders made on the fly, and one workflow run of the tiny scene."""
+import fcntl
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 import yaml
+
+REPO = Path(__file__).resolve().parents[2]
+BIN = Path(sys.executable).parent
+# As the README runs it (.venv/bin/snakemake, venv not activated): the stage programs are not on PATH.
+ENV = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep)
+                                             if Path(p).resolve() != BIN.resolve())}
 
 
 def make_photo(folder: Path, width: int = 64, height: int = 48, name: str = "photo.png") -> Path:
@@ -49,3 +59,31 @@ def scene_dir(tmp_path: Path) -> Path:
     folder = tmp_path / "scenes" / "tiny"
     write_scene(folder)
     return folder
+
+
+def snakemake(workdir: Path, *args: str) -> str:
+    """The workflow over workdir/scenes into workdir/results on 2 cores; its output (it must succeed)."""
+    scenes, results = workdir / "scenes", workdir / "results"
+    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2",
+           "--config", f"scenes_dir={scenes}", f"results_dir={results}", "device=cpu", *args]
+    proc = subprocess.run(cmd, cwd=workdir, env=ENV, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    return proc.stdout + proc.stderr
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory) -> Path:
+    """A folder holding one complete workflow run of the tiny scene (scenes/tiny, results/tiny), made once per
+    test session: under pytest-xdist the first worker to ask makes it under a file lock in the session's own
+    temporary folder, and the others wait for it. Tests only read it, or edit its scene in place and restore it
+    (test_backbone_workflow.jobs_after_edit)."""
+    base = tmp_path_factory.getbasetemp()
+    shared = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base  # xdist: <session>/popen-gwN
+    workdir, done = shared / "tiny_run", shared / "tiny_run.done"
+    with open(shared / "tiny_run.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not done.exists():
+            write_scene(workdir / "scenes" / "tiny")
+            snakemake(workdir)
+            done.touch()
+    return workdir

@@ -2,16 +2,13 @@
 second run on one core; and a rerun that recovers after the disk was full."""
 import os
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
-from .conftest import write_scene
+from .conftest import BIN, ENV, REPO, write_scene
 from .mounts import resize, tmpfs
-from .test_backbone_workflow import ENV, REPO
 
-BIN = Path(sys.executable).parent
 ODD_SCENE = "my ball (v2) [ü].x"
 OUTPUTS = ("gaussians.h5", "trajectories.h5", "setup.png", "coarse.h5", "coarse.mp4", "video.mp4",
            "contact_sheet.png")

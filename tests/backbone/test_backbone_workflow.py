@@ -3,7 +3,6 @@ import os
 import re
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -14,22 +13,7 @@ import yaml
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
 from schemas.video import read_video
 
-from .conftest import tiny_scene_dict, write_scene
-
-REPO = Path(__file__).resolve().parents[2]
-BIN = Path(sys.executable).parent
-# As the README runs it (.venv/bin/snakemake, venv not activated): the stage programs are not on PATH.
-ENV = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep)
-                                             if Path(p).resolve() != BIN.resolve())}
-
-
-def snakemake(workdir: Path, *args: str) -> str:
-    scenes, results = workdir / "scenes", workdir / "results"
-    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2",
-           "--config", f"scenes_dir={scenes}", f"results_dir={results}", "device=cpu", *args]
-    proc = subprocess.run(cmd, cwd=workdir, env=ENV, capture_output=True, text=True)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-    return proc.stdout + proc.stderr
+from .conftest import BIN, ENV, REPO, snakemake, tiny_scene_dict, write_scene
 
 
 def planned_jobs(workdir: Path) -> dict:
@@ -42,12 +26,10 @@ def planned_jobs(workdir: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def finished_run(tmp_path_factory) -> Path:
-    """One complete workflow run of the tiny scene; later tests edit copies of it."""
-    workdir = tmp_path_factory.mktemp("workflow")
-    write_scene(workdir / "scenes" / "tiny")
-    snakemake(workdir)
-    return workdir
+def finished_run(tiny_run) -> Path:
+    """The session's complete run of the tiny scene (conftest.tiny_run); module scope keeps this module's tests,
+    which edit its scene in place, on one worker."""
+    return tiny_run
 
 
 @pytest.mark.slow

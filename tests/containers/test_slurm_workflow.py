@@ -1,5 +1,6 @@
 """The example workflow through a real one-node SLURM cluster (slurm-wlm on loopback, started and
-stopped here) with the SLURM profile: the same videos as a local run."""
+stopped here) with the SLURM profile: the same videos as a local run (the session's run of the tiny
+scene, tests/backbone/conftest.tiny_run, which the workflow tests read too)."""
 import os
 import subprocess
 import sys
@@ -10,7 +11,7 @@ import pytest
 
 from schemas.video import read_video
 
-from ..backbone.conftest import write_scene
+from ..backbone.conftest import tiny_run, write_scene  # noqa: F401 (tiny_run: a fixture)
 from .slurm_cluster import slurm_cluster, why_unavailable
 
 REPO = Path(__file__).resolve().parents[2]
@@ -40,14 +41,13 @@ def run_workflow(workdir: Path, env: dict, *args: str) -> None:
 
 
 @pytest.mark.slow
-def test_slurm_run_makes_the_same_videos_as_a_local_run(cluster, tmp_path):
-    run_workflow(tmp_path / "local", dict(os.environ), "--cores", "2")
+def test_slurm_run_makes_the_same_videos_as_a_local_run(cluster, tiny_run, tmp_path):
     run_workflow(tmp_path / "slurm", cluster, *SLURM_ARGS)
     # Every stage ran as its own SLURM job (the executor keeps one log folder per rule).
     slurm_logs = tmp_path / "slurm" / ".snakemake" / "slurm_logs"
     assert {p.name for p in slurm_logs.iterdir()} >= {f"rule_{r}" for r in ("reconstruct", "simulate", "render",
                                                                              "enhance")}
     for name in ("coarse.mp4", "video.mp4"):
-        local, _, _ = read_video(tmp_path / "local" / "results" / "tiny" / name)
+        local, _, _ = read_video(tiny_run / "results" / "tiny" / name)
         slurm, _, _ = read_video(tmp_path / "slurm" / "results" / "tiny" / name)
         assert local.shape == slurm.shape and np.array_equal(local, slurm), name
