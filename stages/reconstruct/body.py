@@ -2,7 +2,8 @@
 
 The closure (closure.object_depths) takes a body for each object: a standing solid (a body of revolution
 about the vertical or an upright box), the union of its medial balls, or both (a cup and the balls of its
-handle), cut to a slab where the scene gives its thickness (Slab), cut flat where it stands. `Body` evaluates that body's signed distance exactly at any point, and
+handle), or where the scene gives its thickness the silhouette cut to a slab (Prism); cut flat where it
+stands. `Body` evaluates that body's signed distance exactly at any point, and
 `sample` lays it on a grid aligned with gravity whose middle node lies on the body's centre of volume
 (schemas.solid.SolidGrid), so a body symmetric about a vertical plane through its centre is sampled
 symmetrically, whatever the photograph's pixels.
@@ -13,6 +14,7 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 import numpy as np
+from scipy import ndimage
 
 from schemas.solid import NODES, SolidGrid, gravity_axes, inside_share
 
@@ -71,19 +73,25 @@ class Standing:
 
 
 @dataclass
-class Slab:
-    """A part (Balls, Standing) cut to a slab: its points within `half` m of the plane x . normal = middle
-    (normal (3,) unit, camera frame; middle m)."""
+class Prism:
+    """A flat object: its silhouette's cone of rays cut to a slab, the points whose picture lies on the
+    silhouette and within `half` m of the plane x . normal = middle (normal (3,) unit, camera frame; middle m).
+    outside_px (H,W): the silhouette's signed distance in pixels (negative inside); K (3,3) its camera."""
 
-    part: Balls | Standing
+    outside_px: np.ndarray
+    K: np.ndarray
     normal: np.ndarray
     middle: float
     half: float
 
     def distance(self, points: np.ndarray) -> np.ndarray:
-        """(P,) signed distance in m of camera-frame points (P,3): the larger of the part's and the slab's (exact
-        outside where one of them is nearest, a lower bound at the slab's rim)."""
-        return np.maximum(self.part.distance(points), np.abs(points @ self.normal - self.middle) - self.half)
+        """(P,) signed distance in m of camera-frame points (P,3): the larger of the slab's and the silhouette's
+        (its pixels at the point's depth; a lower bound at the rim, exact on the faces)."""
+        z = np.maximum(points[:, 2], 1e-9)
+        cols = self.K[0, 0] * points[:, 0] / z + self.K[0, 2] - 0.5
+        rows = self.K[1, 1] * points[:, 1] / z + self.K[1, 2] - 0.5
+        beside = ndimage.map_coordinates(self.outside_px, [rows, cols], order=1, mode="nearest") * z / self.K[0, 0]
+        return np.maximum(beside, np.abs(points @ self.normal - self.middle) - self.half)
 
 
 @dataclass

@@ -31,7 +31,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from schemas.camera import pixel_rays
 
-from .body import Balls, Body, Slab, Standing
+from .body import Balls, Body, Prism, Standing
 from .depth import ObjectDepth, aligned_front, medial_balls
 from .standing import NEAR_PX, GravityView, StandingSolid, standing_solid
 
@@ -290,29 +290,27 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
     return t_in, t_out, solid.on_base, parts
 
 
-def cut_to_thickness(thickness: float, rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, parts: list,
-                     down: np.ndarray) -> tuple[np.ndarray, np.ndarray, list]:
-    """The body between t_in and t_out (N,) along rays (N,3) (camera frame, z = 1), made of `parts`, cut to a
-    slab `thickness` m thick about its middle: (N,) t_in, (N,) t_out and the parts, each a body.Slab. The slab
+def cut_to_thickness(thickness: float, mask: np.ndarray, K: np.ndarray, t_in: np.ndarray, t_out: np.ndarray,
+                     down: np.ndarray) -> tuple[np.ndarray, np.ndarray, Prism]:
+    """A flat object `thickness` m thick: its silhouette `mask` (H,W) bool, photographed by K (3,3), cut to a
+    slab, where the body between t_in and t_out (N,) along its pixels' rays (row-major, camera frame, z = 1)
+    places it. (N,) t_in, (N,) t_out, each ray's chord through the slab, and the body (body.Prism). The slab
     lies across the view made horizontal (gravity along `down` (3,)), as the medial balls' plane does, or
-    across the view itself seen from above (STEEPEST_VERTICAL_PLANE); its middle is the body's centre of volume
-    along its normal. A ray whose part of the body misses the slab (at the outline) keeps a point, where its
-    chord comes nearest to the slab's middle plane."""
+    across the view itself seen from above (STEEPEST_VERTICAL_PLANE); its middle is the placed body's centre
+    of volume along its normal. The body's own shape across the view (a ball, a box) is the prior's guess,
+    which the thickness replaces: every pixel of the silhouette holds the slab."""
+    rays = input_rays(mask, K)
     volume = np.where(np.isfinite(t_in) & np.isfinite(t_out), t_out ** 3 - t_in ** 3, 0.0)
-    mid = np.nan_to_num(0.5 * (t_in + t_out))
-    centre = (volume * mid) @ rays / volume.sum()
+    centre = (volume * np.nan_to_num(0.5 * (t_in + t_out))) @ rays / volume.sum()
     view = centre / np.linalg.norm(centre)
     normal = view - (view @ down) * down
     if np.linalg.norm(normal) < STEEPEST_VERTICAL_PLANE:
         normal = view
     normal = normal / np.linalg.norm(normal)
     along = rays @ normal
-    middle = float(centre @ normal)
-    half = 0.5 * thickness
-    cut_in, cut_out = np.maximum(t_in, (middle - half) / along), np.minimum(t_out, (middle + half) / along)
-    missed = cut_in > cut_out
-    cut_in[missed] = cut_out[missed] = np.clip(middle / along, t_in, t_out)[missed]
-    return cut_in, cut_out, [Slab(part, normal, middle, half) for part in parts]
+    middle, half = float(centre @ normal), 0.5 * thickness
+    outside_px = ndimage.distance_transform_edt(~mask) - ndimage.distance_transform_edt(mask)
+    return (middle - half) / along, (middle + half) / along, Prism(outside_px, K, normal, middle, half)
 
 
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
@@ -398,8 +396,8 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
                   inverse_depth: Optional[np.ndarray] = None,
                   thicknesses_m: Optional[Sequence[Optional[float]]] = None) -> list[ObjectDepth]:
     """Metric front and back camera z (H,W) of each object (labels k + 1), NaN off it: its standing solid
-    (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], cut to
-    a slab thicknesses_m[k] thick where that is given (cut_to_thickness: a flat object), cut flat where it
+    (solid_depths) or else the body of its medial balls (ball_depths), its largest extent sizes_m[k], or where
+    thicknesses_m[k] is given its silhouette cut to a slab that thick there (cut_to_thickness), cut flat where it
     stands on the ground (standing_cut); and that body itself (ObjectDepth.body). With ``inverse_depth`` (a
     depth model's, (H,W)) the front follows the model, aligned to the body's front."""
     down = down_direction(pitch_deg)
@@ -417,7 +415,8 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
                      solid.overlap)
         thickness = thicknesses_m[k] if thicknesses_m is not None else None
         if thickness is not None:
-            t_in, t_out, parts = cut_to_thickness(thickness, input_rays(mask, K), t_in, t_out, parts, down)
+            t_in, t_out, prism = cut_to_thickness(thickness, mask, K, t_in, t_out, down)
+            on_solid_base, parts = np.zeros(len(t_in), bool), [prism]
             log.info("object %d: cut to a slab %.0f mm thick across the view (objects[%d].thickness_m)", k,
                      1e3 * thickness, k)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
