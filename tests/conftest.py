@@ -2,20 +2,34 @@
 
 A module whose tests share a module- or class-scoped fixture (a simulated scene, a reconstruction,
 a workflow run) is one unit of work, so its fixture is built once, on one worker. Every other test
-is a unit of its own, so the two cores stay busy to the end. xdist's own `--dist loadgroup` would
-need an `xdist_group` mark on each of those modules, and on pytest 9 it distributes marked tests
-as if unmarked (pytest-dev/pytest-xdist#1386); `--dist loadfile` keeps every module whole, the
+is a unit of its own, so the two cores stay busy to the end. The longest units start first, so the
+run does not end on one long test while the other worker waits: each test of the last measured run's
+slowest (benchmarks/results/test_suite_slowest.json, written by `python -m benchmarks.test_suite`)
+counts its seconds, every other test one second. xdist's own `--dist loadgroup` would need an
+`xdist_group` mark on each of those modules, and on pytest 9 it distributes marked tests as if
+unmarked (pytest-dev/pytest-xdist#1386); `--dist loadfile` keeps every module whole, the
 long modules without shared fixtures too.
 """
 from __future__ import annotations
 
+import json
 import re
+from collections import OrderedDict
 from functools import lru_cache
 from pathlib import Path
 
 import pytest
 
 SHARED_FIXTURE = re.compile(r"""scope\s*=\s*["'](module|class|package)["']""")
+SLOWEST = Path(__file__).resolve().parents[1] / "benchmarks" / "results" / "test_suite_slowest.json"
+
+
+def measured_seconds() -> dict[str, float]:
+    """Test id -> seconds of the slowest tests of the last measured suite run (empty where there is none)."""
+    try:
+        return {row[0]: float(row[1]) for row in json.loads(SLOWEST.read_text())["rows"]}
+    except (OSError, ValueError, KeyError, IndexError):
+        return {}
 
 
 @lru_cache(maxsize=None)
@@ -36,8 +50,19 @@ def pytest_xdist_make_scheduler(config, log):
     from xdist.scheduler import LoadScopeScheduling  # noqa: PLC0415 (only where xdist runs the suite)
 
     class SharedFixtureScheduling(LoadScopeScheduling):
+        ordered = False
+
         def _split_scope(self, nodeid: str) -> str:
             module = nodeid.split("::", 1)[0]
             return module if shares_fixtures(config.rootpath / module) else nodeid
+
+        def _assign_work_unit(self, node) -> None:
+            if not self.ordered:  # the first assignment: the queue holds every unit
+                seconds = measured_seconds()
+                expected = {scope: sum(seconds.get(test, 1.0) for test in tests)
+                            for scope, tests in self.workqueue.items()}
+                self.workqueue = OrderedDict(sorted(self.workqueue.items(), key=lambda unit: -expected[unit[0]]))
+                self.ordered = True
+            super()._assign_work_unit(node)
 
     return SharedFixtureScheduling(config, log)
