@@ -96,7 +96,7 @@ def main() -> None:
             simulated for its scene's duration with every condition removed, as each preset with the preset's
             defaults (`scene's`: the scene's own material): the largest turn of the body (best rigid fit of all
             particles), the largest travel of its centre of mass along the ground (mm and % of size_m), the
-            largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball,
+            largest sag of its centre of mass, substeps and seconds. Target: 1 degree and 1 % of size_m. ball, loaf,
             coffee and clay are the example scenes (scenes/NAME); shuttle (the model shuttle at the right of
             scikit-image's astronaut, box [352, 0, 470, 290], 0.3 m), cat (chelsea's head, box [20, 0, 400,
             300], 0.15 m), rocket (scikit-image's rocket on its pad, box [296, 120, 348, 410], 0.3 m) and coin
