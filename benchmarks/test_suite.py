@@ -94,8 +94,11 @@ def main() -> None:
         counts, cases = junit_cases(report)
 
     passed = counts["tests"] - counts["failures"] - counts["errors"] - counts["skipped"]
+    busy = sum(seconds for _, seconds, _ in cases)
+    workers = os.cpu_count() or 1  # make test: pytest -n auto
     print(f"{passed} passed, {counts['skipped']} skipped, {counts['failures']} failed, {counts['errors']} errors; "
-          f"pytest {minutes(counts['time'])}, make test {minutes(wall)} (exit status {status})")
+          f"pytest {minutes(counts['time'])}, make test {minutes(wall)} (exit status {status}); "
+          f"the tests' times sum to {minutes(busy)}")
     slowest = sorted(cases, key=lambda c: -c[1])[:SLOWEST]
     for name, seconds, outcome in slowest:
         print(f"{seconds:8.1f} s  {name}  {outcome}")
@@ -111,7 +114,11 @@ def main() -> None:
         "the pytest run and the whole make command, in minutes.",
         command, ["passed", "skipped", "failed", "pytest", "make test"],
         [[passed, counts["skipped"], counts["failures"] + counts["errors"], minutes(counts["time"]), minutes(wall)]],
-        notes=[f"With {setup} and {cache}."], measured_commit=head.split("+")[0])
+        notes=[f"With {setup} and {cache}.",
+               f"The tests' own times (setup, call and teardown, on all workers) sum to {minutes(busy)}: "
+               f"{100 * busy / (workers * counts['time']):.0f} % of {workers} workers' pytest time; the rest is the "
+               "workers' start and collection, and a worker waiting for the other's last test."],
+        measured_commit=head.split("+")[0])
     write_figures(
         "test_suite_slowest", f"The {SLOWEST} slowest tests" + part,
         "The tests of the run above that took longest, setup, call and teardown together (on a worker that shares "
