@@ -468,16 +468,18 @@ SECTIONS = {
                  half second as in the enhance section, and the enhanced frames' over the coarse render's.""",
                  ["Targets (issue 31): each share within 40 % of its share at frame 0; sharpness ratio at least "
                   "0.6.",
-                  "Why the logo's heap fills the picture (decision 0037): the symmetric prior sweeps the "
-                  "silhouette's medial balls, so the flat logo's disc is a ball of sand, 0.30 x 0.30 x 0.30 m, "
-                  "0.0141 m^3. It spreads to 0.64 x 0.12 x 0.64 m, evenly about its centre (camera z 0.31-0.95 m "
-                  "about 0.63 m): its front comes to 0.31 m from the camera, half the body's distance, where a "
-                  "grain of the lattice spacing (9.5 mm) is 15 px, not 8. The same reconstruction squashed to a "
-                  "3 cm disc (0.0014 m^3), filled from its Gaussians and simulated with the scene's physics, "
-                  "heaps 0.49 x 0.05 x 0.18 m, all in the picture, its nearest grains 8.7 px: shares 41 % / 59 % "
-                  "-> 53 % / 47 % (change 29 %), sharpness ratio 1.27 (coarse render). The wheel is a 0.27 m deep "
-                  "block whose heap reaches the camera's plane; the shuttle, 0.09 m deep, heaps within the "
-                  "picture.",
+                  "Why the logo's heap filled the picture (decision 0037): a disc's silhouette makes a ball (a "
+                  "standing body of revolution, or the medial balls), so the flat logo was a ball of sand, 0.30 x "
+                  "0.30 x 0.30 m, 0.0141 m^3. It spread to 0.64 x 0.12 x 0.64 m, evenly about its centre (camera "
+                  "z 0.31-0.95 m about 0.63 m): its front came to 0.31 m from the camera, where a grain of the "
+                  "lattice spacing (9.5 mm) is 15 px, not 8. Before, as a ball, rendered by the same code: shares "
+                  "41 % / 59 % -> 70 % / 30 % (change 70 %), sharpness ratio 0.39. After, with "
+                  "objects[0].thickness_m: 0.03 (the 3 cm disc it shows, 0.0022 m^3): it heaps 0.50 x 0.06 x "
+                  "0.20 m, no particle past the picture's sides (the row above).",
+                  "The wheel keeps its scene (a ball, 0.27 m deep, whose heap reaches the camera's plane: the row "
+                  "above). A copy of its scene with thickness_m: 0.03 heaps 0.71 x 0.06 x 0.50 m, 18 % of its "
+                  "particles past the picture's sides: shares 71 % / 29 % -> 68 % / 32 % (change 10 %), "
+                  "sharpness ratio 329. The shuttle, 0.09 m deep, heaps within the picture.",
                   "The shares follow the sand, not the render: each heap shows the colours of its particles in "
                   "front within 2 (logo) and 4 (shuttle) points. The wheel's near-black pixels have no stable "
                   "chromaticity (its box holds the photograph's black corners).",
@@ -490,8 +492,8 @@ SECTIONS = {
                   "14.5, wheel 183 -> 165; shares unchanged (logo 70 % / 30 %, shuttle 66 % / 34 %, wheel 86 % / "
                   "14 %).",
                   "Each scene (scenes/logo; benchmarks/scenes/wheel, shuttle_sand) run by pm-reconstruct, "
-                  "pm-simulate, pm-render and pm-enhance at this commit into --results and --new-results "
-                  "(results/logo's gaussians.h5, 19001 Gaussians, no longer matches its trajectories.h5, 19039).",
+                  "pm-simulate, pm-render and pm-enhance into --results and --new-results: the logo at ee6312a, "
+                  "the wheel and the shuttle at 4298842 (a scene without thickness_m reconstructs as before).",
                   "On tests/render_enhance/test_render_granular.py's log seen end-on (front half orange half "
                   "green, its unseen side green): orange 50 % at frame 0, 15 % of the heap with the colour of "
                   "the nearest surface Gaussian (before decision 0023), 49 % with the rest-ray colour."]),
