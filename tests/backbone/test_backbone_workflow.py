@@ -117,11 +117,13 @@ def test_killed_stage_leaves_no_artifact(tmp_path):
     scene.write_text(yaml.safe_dump(raw))
     out = tmp_path / "r" / "gaussians.h5"
     proc = subprocess.Popen([str(BIN / "pm-reconstruct"), "--scene", str(scene), "--out", str(out), "--device", "cpu"],
-                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    time.sleep(8)
+                            env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    for line in proc.stderr:
+        if "iteration" in line:  # optimising
+            break
     assert proc.poll() is None, "the stage should still be optimising"
     os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
+    proc.communicate()
     assert not out.exists()
 
 
