@@ -129,6 +129,19 @@ def test_stage_keys_separate_the_stages(scene_dir):
     assert [s for s in before if before[s] != after[s]] == ["simulate"]
 
 
+def test_thickness_is_hashed_for_reconstruct_only_where_given(scene_dir):
+    """objects[].thickness_m reruns reconstruct alone, and a scene without it hashes as before the key existed
+    (the reconstruct key of a scene without it holds no thickness_m at all)."""
+    scene = load_scene(scene_dir)
+    assert "thickness_m" not in stage_keys(scene, "reconstruct")["objects"][0]
+    before = {s: config_hash(stage_keys(scene, s)) for s in ("reconstruct", "simulate", "render", "enhance")}
+    raw = yaml.safe_load((scene_dir / "scene.yaml").read_text())
+    raw["objects"][0]["thickness_m"] = 0.02
+    write_scene(scene_dir, raw)
+    after = {s: config_hash(stage_keys(load_scene(scene_dir), s)) for s in before}
+    assert [s for s in before if before[s] != after[s]] == ["reconstruct"]
+
+
 def test_hash_does_not_depend_on_where_the_scene_lives(tmp_path):
     a, b = write_scene(tmp_path / "a"), write_scene(tmp_path / "elsewhere" / "b")
     assert config_hash(stage_keys(load_scene(a), "reconstruct")) == config_hash(stage_keys(load_scene(b), "reconstruct"))
