@@ -92,7 +92,9 @@ def fit_shading(value: np.ndarray, normals: np.ndarray, pixels: np.ndarray) -> t
     v = value[pixels].astype(np.float64)
     design = np.concatenate([np.ones((len(v), 1)), normals[pixels].astype(np.float64)], axis=1)
     coef, *_ = np.linalg.lstsq(design, v, rcond=None)
-    explained = 1.0 - np.mean((design @ coef - v) ** 2) / max(float(np.var(v)), 1e-12)
+    variance = float(np.var(v))
+    # a photograph of even brightness over the objects says nothing of a light
+    explained = 1.0 - np.mean((design @ coef - v) ** 2) / variance if variance > 1e-12 else 0.0
     return Shading(float(coef[0]), coef[1:]), float(explained)
 
 

@@ -164,7 +164,7 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     """Where the surface has opened and the interior shows in front (the render's distance a lattice
     spacing nearer than that of the Gaussians alone, rendered by splat), the photograph is not trusted:
     the flow backend shows the render's interior colour, never photograph pixels read through it (here
-    a white photograph, which would stand out)."""
+    a white photograph, which would stand out); with relight on as well, over the sphere's black one."""
     name, gaussians, trajectories, coarse = simulated
     if name not in (TORN_IN_TWO, "sand heap", "torn fracture ball"):
         pytest.skip("a surface that opens: the stretched jelly's stays whole")
@@ -181,11 +181,14 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     assert opened.sum() > 30, name
     photo = gaussians.photo.copy()
     gaussians.photo[:] = 255
-    frames = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=False)
+    white = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=False)
     gaussians.photo[:] = photo
+    # the sphere's own photograph is black: no light fits it (fitted, its shading would be 0 everywhere)
+    lit = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=True)
     rendered = coarse.rgb[-1].astype(float) / coarse.alpha[-1][..., None]
-    # within the rgb's rounding (0.5 / alpha) and the at most 1 % of background behind alpha > 0.99 (2.55)
-    assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 0.5 / 0.99 + 0.01 * 255
+    for frames in (white, lit):
+        # within the rgb's rounding (0.5 / alpha) and the at most 1 % of background behind alpha > 0.99 (2.55)
+        assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 0.5 / 0.99 + 0.01 * 255
 
 
 
