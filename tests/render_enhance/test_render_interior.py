@@ -164,7 +164,8 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     """Where the surface has opened and the interior shows in front (the render's distance a lattice
     spacing nearer than that of the Gaussians alone, rendered by splat), the photograph is not trusted:
     the flow backend shows the render's interior colour, never photograph pixels read through it (here
-    a white photograph, which would stand out); with relight on as well, over the sphere's black one."""
+    a white photograph, which would stand out); nor re-lit, with relight on, over the sphere's black
+    photograph and over one shaded by a light."""
     name, gaussians, trajectories, coarse = simulated
     if name not in (TORN_IN_TWO, "sand heap", "torn fracture ball"):
         pytest.skip("a surface that opens: the stretched jelly's stays whole")
@@ -184,9 +185,15 @@ def test_flow_shows_the_interior_where_the_surface_opens(simulated):
     white = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=False)
     gaussians.photo[:] = photo
     # the sphere's own photograph is black: no light fits it (fitted, its shading would be 0 everywhere)
+    unlit = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=True)
+    # shaded by a light from the upper left, which the backend fits: the interior is not re-lit either
+    light = np.array([-0.5, -0.5, -0.7]) / np.linalg.norm([-0.5, -0.5, -0.7])
+    facing = np.clip(np.nan_to_num(coarse.normal[0]) @ light, 0, 1)  # camera-facing normals
+    gaussians.photo[:] = (255 * (0.2 + 0.8 * facing))[..., None].astype(np.uint8)
     lit = enhance_frames(coarse, gaussians, threshold=0.5, hidden_surfaces="photo", relight=True)
+    gaussians.photo[:] = photo
     rendered = coarse.rgb[-1].astype(float) / coarse.alpha[-1][..., None]
-    for frames in (white, lit):
+    for frames in (white, unlit, lit):
         # within the rgb's rounding (0.5 / alpha) and the at most 1 % of background behind alpha > 0.99 (2.55)
         assert np.abs(frames[-1][opened] - rendered[opened]).max() <= 0.5 / 0.99 + 0.01 * 255
 
