@@ -41,13 +41,15 @@ def run_workflow(workdir: Path, env: dict, *args: str) -> None:
 
 
 @pytest.mark.slow
-def test_slurm_run_makes_the_same_videos_as_a_local_run(cluster, tiny_run, tmp_path):
+def test_slurm_run_makes_the_same_videos_as_a_local_run(cluster, tmp_path, request):
     run_workflow(tmp_path / "slurm", cluster, *SLURM_ARGS)
+    # asked for only now: under xdist the other worker is likely making it meanwhile, so this one need not wait
+    local_run = request.getfixturevalue("tiny_run")
     # Every stage ran as its own SLURM job (the executor keeps one log folder per rule).
     slurm_logs = tmp_path / "slurm" / ".snakemake" / "slurm_logs"
     assert {p.name for p in slurm_logs.iterdir()} >= {f"rule_{r}" for r in ("reconstruct", "simulate", "render",
                                                                              "enhance")}
     for name in ("coarse.mp4", "video.mp4"):
-        local, _, _ = read_video(tiny_run / "results" / "tiny" / name)
+        local, _, _ = read_video(local_run / "results" / "tiny" / name)
         slurm, _, _ = read_video(tmp_path / "slurm" / "results" / "tiny" / name)
         assert local.shape == slurm.shape and np.array_equal(local, slurm), name
