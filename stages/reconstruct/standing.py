@@ -5,6 +5,10 @@ Things photographed standing are often turned (cups, bottles, tins) or boxed
 least FIT_IOU it is taken for the body: a cylinder keeps its flat top and base
 and a box its corners, which the medial balls (closure.ball_depths) round off
 (which give an upright cylinder 0.58-0.69 of its volume, a turned box 0.56-0.70).
+A body of revolution wider than tall is taken only where its top is a face
+whose rim the outline traces: a loaf or a capsule lying across the picture
+shows the same outline as a lens turned about the vertical (Revolution.seen_turned,
+docs/decisions/0035-lying-or-turned.md).
 
 Every fit is made in the gravity frame of a view turned to face the object
 (GravityView: x horizontal across, y down along gravity, z horizontal towards
@@ -456,7 +460,8 @@ def overlap(view: GravityView, image: np.ndarray) -> tuple[float, np.ndarray]:
     handles = np.zeros_like(mask)
     for k, piece in enumerate(ndimage.find_objects(pieces), start=1):
         part = pieces[piece] == k
-        if k not in twinned and ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max() <= HANDLE_THICKNESS * own:
+        thickness = ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max()
+        if k not in twinned and thickness <= HANDLE_THICKNESS * own:
             handles[piece] |= part
     target = mask & ~handles
     return float(np.sum(image & target) / max(np.sum(image | target), 1)), target

@@ -193,13 +193,14 @@ def test_a_standing_body_whose_base_is_hidden_stands_on_a_flat_cut(hidden_by):
     assert inside > 0.6 * radius
 
 
+CENTRE = np.array([0.0, 0.0, 0.6])
 LYING_OR_STANDING = {
-    "capsule lying across, level": (0.0, lambda pitch: Capsule(np.array([0.0, 0.0, 0.6]), np.array([0.08, 0.0, 0.0]), 0.04), False),
-    "capsule lying across": (20.0, lambda pitch: Capsule(np.array([0.0, 0.0, 0.6]), np.array([0.08, 0.0, 0.0]), 0.04), False),
-    "box lying across": (20.0, lambda pitch: TurnedBox(np.array([0.0, 0.0, 0.6]), np.array([0.1, 0.035, 0.04]),
-                                                       axes=standing_axes(pitch)), False),
-    "upright cylinder": (20.0, lambda pitch: UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(pitch), 0.05, 0.14), True),
-    "squat cylinder": (20.0, lambda pitch: UprightCylinder(np.array([0.0, 0.0, 0.6]), standing_axes(pitch), 0.08, 0.06), True),
+    "capsule lying across, level": (0.0, lambda pitch: Capsule(CENTRE, np.array([0.08, 0.0, 0.0]), 0.04), False),
+    "capsule lying across": (20.0, lambda pitch: Capsule(CENTRE, np.array([0.08, 0.0, 0.0]), 0.04), False),
+    "box lying across": (20.0, lambda pitch: TurnedBox(CENTRE, np.array([0.1, 0.035, 0.04]), axes=standing_axes(pitch)),
+                         False),
+    "upright cylinder": (20.0, lambda pitch: UprightCylinder(CENTRE, standing_axes(pitch), 0.05, 0.14), True),
+    "squat cylinder": (20.0, lambda pitch: UprightCylinder(CENTRE, standing_axes(pitch), 0.08, 0.06), True),
 }
 
 
