@@ -27,7 +27,7 @@ from scipy import signal
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
+from .compositing import STILL_PX, Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
 from .shadow import Shadows
 from .unseen import Continuation, MirrorPlanes, continue_inwards
 
@@ -111,6 +111,31 @@ def objects_reader(photo: np.ndarray, on_objects: np.ndarray) -> Callable[[np.nd
     return read
 
 
+def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """(h, w) float32 in [0, 1]: how much each pixel's source lies on the photograph's objects.
+
+    The reconstruction's Gaussians along the silhouette reach past the objects' mask (on the examples the
+    render's alpha is still 1 two pixels beyond it, and falls to 0 over the next three): the photograph
+    shows the background there, so that fringe has no colour of the objects to show, and at rest it drew
+    a halo around them. A pixel that stands where its source is keeps its alpha by exactly this share,
+    so at rest the background (the photograph) shows there. A surface that moved keeps it up to a pixel
+    beyond the mask: the limb at rest projects onto the silhouette's own pixels and their neighbours, and
+    turned towards the camera it is the object's surface, not a fringe.
+
+    Args:
+        touched: (h, w) bool, the output pixels the photograph's objects cover at least in part.
+        uv: (h, w, 2) the frame's source points as rendered (unsmoothed: at rest exactly each pixel's
+            centre), NaN where there is no surface.
+    """
+    h, w = touched.shape
+    moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
+    still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
+    exact = sample_at(touched.astype(np.float32), uv)
+    near = sample_at(cv2.dilate(touched.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(np.float32), uv)
+    share = still * exact + (1 - still) * near
+    return np.where(np.isfinite(uv[..., 0]), share, 1.0).astype(np.float32)
+
+
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
     """The source map with its per-pixel jitter removed, NaN where it was NaN.
 
@@ -159,7 +184,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     T, h, w = coarse.alpha.shape
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
-    read_objects = objects_reader(photo, resize_to((gaussians.mask > 0).astype(np.float32), w, h) > 0.5)
+    objects_share = resize_to((gaussians.mask > 0).astype(np.float32), w, h)
+    read_objects = objects_reader(photo, objects_share > 0.5)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
     planes = MirrorPlanes.of(gaussians)
@@ -181,7 +207,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
         background = backdrop(coarse.alpha[t], rendered_uv, shadows(t, scale) if ground else None)
-        frames[t] = blend_over_background(colour, coarse.alpha[t], background)
+        alpha = coarse.alpha[t] * source_on_objects(objects_share > 0, rendered_uv)
+        frames[t] = blend_over_background(colour, alpha, background)
         on = coarse.alpha[t] > 0.5
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph, %.0f%% of them continuing "
                  "surfaces it did not see", t + 1, T, 100.0 * float(weight[..., 0][on].mean()) if on.any() else 0.0,
