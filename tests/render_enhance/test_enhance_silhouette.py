@@ -23,7 +23,7 @@ def fringed_gaussians() -> tuple[GaussiansArtifact, np.ndarray]:
     at the nearest mask pixel's distance and with its colour; and the photograph's mask (H, W) bool."""
     K = intrinsics_from_fov(40.0, W, H)
     shot = photograph(Capsule.tilted(distance=0.5), K, np.eye(4), W, H)
-    ring = cv2.dilate(shot.mask.astype(np.uint8), cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * FRINGE_PX + 1,) * 2)) > 0
+    ring = outside_band(shot.mask, 0.0, FRINGE_PX) | shot.mask
     _, (near_rows, near_cols) = ndimage.distance_transform_edt(~shot.mask, return_indices=True)
     rows, cols = np.nonzero(ring)
     src = near_rows[rows, cols], near_cols[rows, cols]
