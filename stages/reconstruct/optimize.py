@@ -117,7 +117,9 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
              seed: int = 0, held: Optional[np.ndarray] = None) -> tuple[Gaussians, np.ndarray]:
     """Optimise ``initial`` against ``views`` (views[0] the input view, with colour).
 
-    ``held`` (G,) bool: Gaussians whose means stay where they are (their other parameters are optimised).
+    ``held`` (G,) bool: Gaussians whose means and colours stay as given (their other parameters are
+    optimised): faces no view sees, which colour supervision would only reach through the faces in front
+    of them, where Adam scales a vanishing gradient up to a full step and drifts them to any colour.
 
     Returns:
         The optimised Gaussians, transparent ones pruned, and the loss history
@@ -153,6 +155,7 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
         total.backward()
         if free is not None:  # a zero gradient from the start leaves Adam's moments, and so the step, at zero
             params.means.grad *= free
+            params.colors.grad *= free
         optimizer.step()
         with torch.no_grad():
             params.colors.clamp_(0, 1)

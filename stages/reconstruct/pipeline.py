@@ -185,7 +185,8 @@ def optimize_scene(scene: Scene, prepared: Prepared, device: str = "cpu",
               for i, v in enumerate(scene.reconstruct.extra_views)]
     log.info("optimising %d Gaussians for %d iterations at %dx%d on %d view(s)", len(prepared.initial),
              settings.iterations, views[0].camera.width, views[0].camera.height, len(views))
-    # Only the input view supervises the prior's unseen back and rim wall; where no extra view sees them,
-    # they stay where the prior put them (the optimisation would drift them by its learning rate a step).
+    # Only the input view supervises the prior's unseen back, rim wall and cut base; where no extra view sees
+    # them, they stay where the prior put them, in the colour of the seen pixel whose ray they lie on (the
+    # optimisation would drift them by its learning rate a step: rainbow speckles on a cut base).
     held = None if views[1:] else ~prepared.seen
     return optimize(prepared.initial, views, settings, device, held=held)
