@@ -112,15 +112,15 @@ def objects_reader(photo: np.ndarray, on_objects: np.ndarray) -> Callable[[np.nd
 
 
 def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
-    """(h, w) float32 in [0, 1]: how much each pixel's source lies on the photograph's objects.
+    """(h, w) float32 in [0, 1]: the share of each pixel's alpha that shows the objects.
 
     The reconstruction's Gaussians along the silhouette reach past the objects' mask (on the examples the
     render's alpha is still 1 two pixels beyond it, and falls to 0 over the next three): the photograph
-    shows the background there, so that fringe has no colour of the objects to show, and at rest it drew
-    a halo around them. A pixel that stands where its source is keeps its alpha by exactly this share,
-    so at rest the background (the photograph) shows there. A surface that moved keeps it up to a pixel
-    beyond the mask: the limb at rest projects onto the silhouette's own pixels and their neighbours, and
-    turned towards the camera it is the object's surface, not a fringe.
+    shows the background there, so at rest that fringe has no colour of the objects to show, and it drew
+    a halo around them. A pixel that stands where its source is keeps its alpha by the share of that
+    source on the objects' pixels, so at rest the background (the photograph) shows beside them, exactly.
+    A pixel that moved keeps its alpha: the limb at rest projects onto the silhouette's pixels and their
+    neighbours, and a surface turned towards the camera from there is the object, not a fringe.
 
     Args:
         touched: (h, w) bool, the output pixels the photograph's objects cover at least in part.
@@ -130,10 +130,7 @@ def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
     h, w = touched.shape
     moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
     still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
-    exact = sample_at(touched.astype(np.float32), uv)
-    near = sample_at(cv2.dilate(touched.astype(np.uint8), np.ones((3, 3), np.uint8)).astype(np.float32), uv)
-    share = still * exact + (1 - still) * near
-    return np.where(np.isfinite(uv[..., 0]), share, 1.0).astype(np.float32)
+    return (1 - still * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
 
 
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
