@@ -23,6 +23,9 @@ from .losses import color_loss, hard_depth_loss
 log = logging.getLogger("physmotion.reconstruct")
 
 LOSS_TERMS = ["total", "color", "silhouette", "hard_depth"]
+SHOWN_PX = 0.5
+"""A held Gaussian whose compositing weights in the input view sum to this many pixels fits its colour there;
+one shown less keeps the colour it was lifted with."""
 
 
 @dataclass
@@ -113,13 +116,24 @@ class _Parameters(torch.nn.Module):
                              self.colors.clamp(0, 1).cpu().numpy().astype(np.float64), object_id)
 
 
+def shown_pixels(params: _Parameters, camera: splat.Camera) -> torch.Tensor:
+    """(G,) how many pixels' worth of each Gaussian the camera shows: the sum over the image of its
+    compositing weight (opacity times transmittance), the rendered colour's derivative by its colour."""
+    params.colors.grad = None
+    params.render(camera).features[..., 0].sum().backward()
+    weight = params.colors.grad[:, 0].detach().clone()
+    params.zero_grad(set_to_none=True)
+    return weight
+
+
 def optimize(initial: Gaussians, views: list[View], settings: Settings, device: str = "cpu",
              seed: int = 0, held: Optional[np.ndarray] = None) -> tuple[Gaussians, np.ndarray]:
     """Optimise ``initial`` against ``views`` (views[0] the input view, with colour).
 
-    ``held`` (G,) bool: Gaussians whose means and colours stay as given (their other parameters are
-    optimised): faces no view sees, which colour supervision would only reach through the faces in front
-    of them, where Adam scales a vanishing gradient up to a full step and drifts them to any colour.
+    ``held`` (G,) bool: Gaussians whose means stay as given, and their colours too unless the input view
+    shows them (their other parameters are optimised): faces no view sees, which colour supervision reaches
+    only through the faces in front of them, where Adam scales a vanishing gradient up to a full step and
+    drifts them to any colour.
 
     Returns:
         The optimised Gaussians, transparent ones pruned, and the loss history
@@ -137,6 +151,9 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
     started = time.perf_counter()
     input_view = views[0]
     free = None if held is None else torch.tensor(~held, device=device)[:, None].float()
+    if held is not None:
+        shown = shown_pixels(params, input_view.camera).cpu().numpy() >= SHOWN_PX
+        colour_free = torch.tensor(~held | shown, device=device)[:, None].float()
     for it in range(settings.iterations):
         if it == settings.decay_at:
             for group in optimizer.param_groups:
@@ -155,7 +172,7 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
         total.backward()
         if free is not None:  # a zero gradient from the start leaves Adam's moments, and so the step, at zero
             params.means.grad *= free
-            params.colors.grad *= free
+            params.colors.grad *= colour_free
         optimizer.step()
         with torch.no_grad():
             params.colors.clamp_(0, 1)

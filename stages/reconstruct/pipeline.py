@@ -186,7 +186,8 @@ def optimize_scene(scene: Scene, prepared: Prepared, device: str = "cpu",
     log.info("optimising %d Gaussians for %d iterations at %dx%d on %d view(s)", len(prepared.initial),
              settings.iterations, views[0].camera.width, views[0].camera.height, len(views))
     # Only the input view supervises the prior's unseen back, rim wall and cut base; where no extra view sees
-    # them, they stay where the prior put them, in the colour of the seen pixel whose ray they lie on (the
-    # optimisation would drift them by its learning rate a step: rainbow speckles on a cut base).
+    # them, they stay where the prior put them, and unless the input view shows them, in the colour of the
+    # seen pixel whose ray they lie on (the optimisation would drift both by its learning rate a step: the
+    # colours to rainbow speckles on a cut base).
     held = None if views[1:] else ~prepared.seen
     return optimize(prepared.initial, views, settings, device, held=held)
