@@ -1,5 +1,6 @@
 """The faces the photograph does not see (the cut base, the back, the rim wall) keep the colour of the seen
-surface they continue: the optimisation, supervised by the photograph alone, leaves them as lifted.
+surface they continue: the optimisation, supervised by the photograph alone, fits those it shows and leaves
+the rest as lifted.
 
 Reference: a ray-cast upright cylinder whose base the picture's lower edge cuts (testing/photographs.py);
 its cut face's Gaussians are compared with the photograph's pixels of the body near them, independent of the lift.
@@ -22,8 +23,8 @@ reached 27 levels here."""
 
 def test_a_face_cut_by_the_picture_border_takes_the_colour_of_the_seen_surface_it_continues(tmp_path):
     """An upright cylinder (r = 45 mm, 80 mm tall) under a camera pitched 30 degrees, its base below the
-    picture's lower edge, is cut flat there; after 300 iterations every unseen Gaussian within 5 mm of the cut (its base, the back and
-    rim wall beside it) has
+    picture's lower edge, is cut flat there; after 300 iterations every unseen Gaussian within 5 mm of the
+    cut (its base, the back and rim wall beside it) has
     a colour within LEVELS levels of the range of the photograph's body pixels near it (NEAR_PX)."""
     width, height, pitch = 128, 96, 30.0
     axes = standing_axes(pitch)
