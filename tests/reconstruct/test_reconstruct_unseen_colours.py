@@ -24,8 +24,8 @@ reached 27 levels here."""
 def test_a_face_cut_by_the_picture_border_takes_the_colour_of_the_seen_surface_it_continues(tmp_path):
     """An upright cylinder (r = 45 mm, 80 mm tall) under a camera pitched 30 degrees, its base below the
     picture's lower edge, is cut flat there; after 300 iterations every unseen Gaussian within 5 mm of the
-    cut (its base, the back and rim wall beside it) has
-    a colour within LEVELS levels of the range of the photograph's body pixels near it (NEAR_PX)."""
+    cut (its base, the back and rim wall beside it) has a colour within LEVELS levels of the range of the
+    photograph's body pixels near it (NEAR_PX)."""
     width, height, pitch = 128, 96, 30.0
     axes = standing_axes(pitch)
     cup = UprightCylinder(np.array([0.0, 0.075, 0.35]), axes, 0.045, 0.08)
