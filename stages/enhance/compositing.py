@@ -84,6 +84,14 @@ STILL_PX = 0.5
 fade out of the background: one pixel of motion leaves e^-4 of them."""
 
 
+def standing_still(source_uv: np.ndarray) -> np.ndarray:
+    """(h, w) in [0, 1]: how surely each pixel shows the point that stood there at rest, from its source point
+    (source_uv (h, w, 2), output image points, NaN off the objects: 0 there) within STILL_PX of its centre."""
+    h, w = source_uv.shape[:2]
+    moved = np.linalg.norm(source_uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
+    return np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
+
+
 class Backdrop:
     """Each frame's background: the photograph beside the object where it still stands as at rest,
     the inpainted fill where it moved or left.
@@ -105,7 +113,6 @@ class Backdrop:
         h, w = alpha_rest.shape
         self.photo, self.fill = photo.astype(np.float32), fill.astype(np.float32)
         self.outside = 1.0 - resize_to((mask > 0).astype(np.float32), w, h)
-        self.pixels = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5
         beyond = (self.outside > 0.5).astype(np.uint8)
         ring = beyond.astype(bool) & (np.abs(self.fill - self.photo).max(-1) > 0)
         # the ring's width: how far the fill reaches past the masks (output pixels)
@@ -123,9 +130,7 @@ class Backdrop:
             shadow: (h, w) in [0, 1], how much the objects' shadows darken the fill (shadow.Shadows),
                 or None. The photograph beside an object that still stands shows its own.
         """
-        moved = np.linalg.norm(source_uv - self.pixels, axis=-1)
-        still = np.where(np.isfinite(moved), np.exp(-(np.nan_to_num(moved) / STILL_PX) ** 2), 0.0)
-        near_now = cv2.GaussianBlur((alpha * still).astype(np.float32), (0, 0), self.reach_px)
+        near_now = cv2.GaussianBlur((alpha * standing_still(source_uv)).astype(np.float32), (0, 0), self.reach_px)
         beside = np.clip(near_now / np.maximum(self.near_rest, 1e-3), 0.0, 1.0) * (self.near_rest > 1e-3)
         fill = self.fill if shadow is None else self.fill * (1 - shadow[..., None])
         return fill + (beside * self.outside)[..., None] * (self.photo - fill)

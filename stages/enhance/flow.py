@@ -27,7 +27,8 @@ from scipy import signal
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 
-from .compositing import STILL_PX, Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, unpremultiply
+from .compositing import (Backdrop, blend_over_background, normalised_blur, resize_to, sample_at, standing_still,
+                          unpremultiply)
 from .shadow import Shadows
 from .unseen import Continuation, MirrorPlanes, continue_inwards
 
@@ -127,10 +128,7 @@ def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
         uv: (h, w, 2) the frame's source points as rendered (unsmoothed: at rest exactly each pixel's
             centre), NaN where there is no surface.
     """
-    h, w = touched.shape
-    moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
-    still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
-    return (1 - still * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
+    return (1 - standing_still(uv) * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
 
 
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:

@@ -25,7 +25,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 from schemas.camera import pixel_rays
 
-from .compositing import STILL_PX, resize_to
+from .compositing import resize_to, standing_still
 from .unseen import MirrorPlanes, rest_in_camera
 
 log = logging.getLogger("physmotion.enhance.shadow")
@@ -114,8 +114,6 @@ class Shadows:
         self.coarse, self.ground, self.light, self.planes, self.rays = coarse, ground, light, planes, rays
         self.photographed, self.strength, self.softness_px = photographed, strength, softness_px
         self.rest_cast, self.rest_along = rest_cast, rest_along
-        h, w = coarse.alpha.shape[1:]
-        self.pixels = np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5
 
     @classmethod
     def fit(cls, coarse: CoarseArtifact, gaussians: GaussiansArtifact, light: Optional[np.ndarray],
@@ -190,8 +188,7 @@ class Shadows:
             source_scale: output pixels per photograph pixel (source_uv is in the photograph's).
         """
         # how much of the objects stands where it stood in the photograph
-        moved = np.linalg.norm(self.coarse.source_uv[t] * source_scale - self.pixels, axis=-1)
-        staying = np.where(np.isfinite(moved), np.exp(-(np.nan_to_num(moved) / STILL_PX) ** 2), 0.0)
+        staying = standing_still(self.coarse.source_uv[t] * source_scale)
         still = float(np.clip((self.coarse.alpha[t] * staying).sum() / max(self.coarse.alpha[0].sum(), 1e-6), 0, 1))
         footprint, _ = self.footprint(t, self.rest_along)
         cast = self.strength * cv2.GaussianBlur(footprint, (0, 0), max(0.5, self.softness_px))

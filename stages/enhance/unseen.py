@@ -31,7 +31,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 from schemas.camera import pixel_rays
 
-from .compositing import STILL_PX, normalised_blur, sample_at
+from .compositing import normalised_blur, sample_at, standing_still
 from .relight import NORMAL_SMOOTHING, Relighting, Shading, smooth_normals, to_linear, to_srgb
 
 log = logging.getLogger("physmotion.enhance.unseen")
@@ -315,9 +315,7 @@ class Continuation:
                 (enhance.hidden_surfaces "photo"); else only the seen ones' does.
         """
         shading_now, facing_now = self.shading_now(t)
-        h, w = seen.shape
-        moved = np.linalg.norm(uv - (np.stack(np.meshgrid(np.arange(w), np.arange(h)), -1) + 0.5), axis=-1)
-        still = np.exp(-(np.nan_to_num(moved, nan=np.inf) / STILL_PX) ** 2)
+        still = standing_still(uv)
         direct, shading_direct, inside_direct = self.read(uv, shading_now, facing_now, still)
         mirrored_uv = self.mirror(uv)
         mirrored, shading_mirrored, inside_mirrored = self.read(mirrored_uv, shading_now, facing_now,
