@@ -258,6 +258,23 @@ def grain_relief(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
     return np.where(granular & (relief >= 1 / 255), relief, 0.0)  # less moves no channel by a grey level
 
 
+def grain_reach(means: torch.Tensor, covariances: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """Where grains (means (C, 3) m, covariances (C, 3, 3) m^2) reach in the picture: the picture's up (3,)
+    and each grain's unit direction from the eye (C, 3), world frame, and each grain's reach along them (C,)
+    and (C,), m: its radius at alpha 1/2, a hard grain's edge (GRAIN_OPACITY)."""
+    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
+    up = -to_camera_R[1, :3]
+    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
+    view = means - eye
+    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # a hard grain's alpha-1/2 radius in standard deviations
+
+    def reach(d: torch.Tensor) -> torch.Tensor:
+        return edge * torch.einsum("pi,pij,pj->p", d, covariances, d).clamp_min(0).sqrt()
+
+    return up, view, reach(up.expand_as(view)), reach(view)
+
+
 def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
              relief: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
     """Grains shaded as lit from above: (P, 3) the colours of the grains' bodies, and of the C grains whose
@@ -272,17 +289,10 @@ def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
     at height 1 - rho in the grain's disc, is 1 + k (1 - rho); over the rest of the disc it is
     1 - k rho^2 / (1 + rho): over the whole grain 1, so a grain keeps its colour on average. The cap's
     factor stops where a channel would pass 1, so its hue stays (as grain_colours)."""
-    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
-    up = -to_camera_R[1, :3]  # the picture's up, world frame
-    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
     lit = torch.nonzero(relief > 0)[:, 0]
     k, grain = relief[lit].to(colours.dtype), covariances[lit]
-    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # a hard grain's alpha-1/2 radius in standard deviations
-    reach = lambda d: edge * torch.einsum("pi,pij,pj->p", d, grain, d).clamp_min(0).sqrt()  # noqa: E731
-    view = means[lit] - eye
-    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
-    cap_means = (means[lit] + ((1 - CAP_RADIUS) * reach(up.expand_as(view)))[:, None] * up
-                 - (0.01 * reach(view))[:, None] * view)
+    up, view, reach_up, reach_view = grain_reach(means[lit], grain, camera)
+    cap_means = means[lit] + ((1 - CAP_RADIUS) * reach_up)[:, None] * up - (0.01 * reach_view)[:, None] * view
     body = colours * (1 - relief.to(colours.dtype) * CAP_RADIUS ** 2 / (1 + CAP_RADIUS))[:, None]
     brighter = torch.minimum(1 + k * (1 - CAP_RADIUS), 1 / colours[lit].amax(1).clamp_min(1e-6))
     return body, cap_means, CAP_RADIUS ** 2 * grain, opacities[lit], colours[lit] * brighter[:, None]
@@ -301,17 +311,10 @@ def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
     covers it, in the gaps under the grains, as the shadow a grain casts into the heap under a sky above. Its
     colour is the grain's times CREVICE_SHADE (the hue kept: a heap keeps its colours' shares), its opacity the
     grain's times the weight (none while the body holds its shape)."""
-    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
-    up = -to_camera_R[1, :3]  # the picture's up, world frame
-    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
     shown = torch.nonzero(shadowed > 0)[:, 0]
     grain = covariances[shown]
-    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # a hard grain's alpha-1/2 radius in standard deviations
-    reach = lambda d: edge * torch.einsum("pi,pij,pj->p", d, grain, d).clamp_min(0).sqrt()  # noqa: E731
-    view = means[shown] - eye
-    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
-    crevice_means = (means[shown] - (CREVICE_DROP * reach(up.expand_as(view)))[:, None] * up
-                     + reach(view)[:, None] * view)
+    up, view, reach_up, reach_view = grain_reach(means[shown], grain, camera)
+    crevice_means = means[shown] - (CREVICE_DROP * reach_up)[:, None] * up + reach_view[:, None] * view
     weight = shadowed[shown].to(opacities.dtype)
     return crevice_means, grain, opacities[shown] * weight, colours[shown] * CREVICE_SHADE
 
