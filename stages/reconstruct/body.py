@@ -16,6 +16,7 @@ from typing import Optional
 import numpy as np
 from scipy import ndimage
 
+from schemas.camera import MIN_DEPTH, project_points
 from schemas.solid import NODES, SolidGrid, gravity_axes, inside_share
 
 from .standing import Revolution
@@ -87,9 +88,8 @@ class Prism:
     def distance(self, points: np.ndarray) -> np.ndarray:
         """(P,) signed distance in m of camera-frame points (P,3): the larger of the slab's and the silhouette's
         (its pixels at the point's depth; a lower bound at the rim, exact on the faces)."""
-        z = np.maximum(points[:, 2], 1e-9)
-        cols = self.K[0, 0] * points[:, 0] / z + self.K[0, 2] - 0.5
-        rows = self.K[1, 1] * points[:, 1] / z + self.K[1, 2] - 0.5
+        cols, rows = (project_points(points, self.K) - 0.5).T  # pixel centres at integer indices
+        z = np.maximum(points[:, 2], MIN_DEPTH)
         beside = ndimage.map_coordinates(self.outside_px, [rows, cols], order=1, mode="nearest") * z / self.K[0, 0]
         return np.maximum(beside, np.abs(points @ self.normal - self.middle) - self.half)
 
