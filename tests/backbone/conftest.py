@@ -61,12 +61,15 @@ def scene_dir(tmp_path: Path) -> Path:
     return folder
 
 
+def snakemake_command(workdir: Path, *args: str, config: tuple = ()) -> list:
+    """The workflow's command line over workdir/scenes into workdir/results on 2 cores."""
+    return [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2", "--config",
+            f"scenes_dir={workdir / 'scenes'}", f"results_dir={workdir / 'results'}", "device=cpu", *config, *args]
+
+
 def snakemake(workdir: Path, *args: str) -> str:
     """The workflow over workdir/scenes into workdir/results on 2 cores; its output (it must succeed)."""
-    scenes, results = workdir / "scenes", workdir / "results"
-    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2",
-           "--config", f"scenes_dir={scenes}", f"results_dir={results}", "device=cpu", *args]
-    proc = subprocess.run(cmd, cwd=workdir, env=ENV, capture_output=True, text=True)
+    proc = subprocess.run(snakemake_command(workdir, *args), cwd=workdir, env=ENV, capture_output=True, text=True)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc.stdout + proc.stderr
 

@@ -13,7 +13,7 @@ import yaml
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
 from schemas.video import read_video
 
-from .conftest import BIN, ENV, REPO, snakemake, tiny_scene_dict, write_scene
+from .conftest import BIN, ENV, snakemake, snakemake_command, tiny_scene_dict, write_scene
 
 
 def planned_jobs(workdir: Path) -> dict:
@@ -162,11 +162,6 @@ def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run
     loss = (out / "report" / "loss.svg").read_text()
     assert "total" in used and all(f">{term}<" in loss for term in used)
     assert loss.count("<polyline") == len(used)
-
-
-def snakemake_command(workdir: Path, *args: str, config: tuple = ()) -> list:
-    return [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2", "--config",
-            f"scenes_dir={workdir / 'scenes'}", f"results_dir={workdir / 'results'}", "device=cpu", *config, *args]
 
 
 def test_the_workflow_has_no_lint_findings(tmp_path):
