@@ -4,20 +4,21 @@ pm-simulate fills each object's volume with a lattice of particles behind its
 surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
 a Gaussian of its own (as PhysGaussian renders its filled particles):
 
-- colour: that of the surface it lies under, the nearest opaque Gaussian of its
-  object at rest (:func:`surface_under`); its rest normal is that Gaussian's too;
+- colour: its object's material (:func:`crumb_colours`), for sand and snow the photograph's
+  on its rest ray; its rest normal is that of the surface it lies under, the nearest opaque
+  Gaussian of its object at rest (:func:`surface_under`);
 - opacity: :data:`INTERIOR_OPACITY`, solid material;
 - covariance: round, of standard deviation :data:`GRAIN_SIGMA` lattice spacings
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
 Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
-surface Gaussians included, becomes a grain (:func:`grain_shapes`). A torn solid's
-grains are soft and round, of its share of the volume, in the colour it had. Sand and
-snow become hard grains of about a lattice spacing, of varied sizes, elongated and turned at
-random, each moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`:
-a heap shows no lattice), each in the photograph's colour where its rest position projects
-(:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it belongs to, so its heap
-shows both), each a little brighter or darker at the same hue (:func:`grain_colours`), each lit
+surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`), of
+varied sizes, elongated and turned at random, each moved off its lattice site by a random fraction of the
+cell (:func:`grain_offsets`: a heap shows no lattice). Sand and snow take the photograph's colour where
+their rest position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the
+part it belongs to, so its heap shows both); a solid's interior, the crumbs of its torn face, the colour of
+its lit half (:func:`crumb_colours`); its surface Gaussians keep theirs. Each grain is a little brighter or
+darker at the same hue (:func:`grain_colours`), each lit
 from above: a brighter cap over a darker body, by its colour's albedo (:func:`grain_relief`,
 :func:`lit_caps`), over the shadowed crevice under it (:func:`crevices`: the gaps between a heap's grains
 are dark, as sand's are, where flat grains edge to edge read as a heap of discs).
@@ -46,7 +47,6 @@ from scipy.spatial.transform import Rotation
 
 import splat
 from schemas.camera import project_points
-from schemas.materials import PRESETS
 
 from .source_map import to_camera
 
@@ -59,12 +59,12 @@ INTERIOR_OPACITY = 1.0
 OPAQUE_ALPHA = 0.99
 """Rest-render alpha from which a pixel hides what lies behind its surface."""
 OPAQUE_SURFACE = 0.5
-"""Opacity from which a surface Gaussian gives its colour to the interior under it (fainter ones are
-the reconstruction's soft edges and floaters, whose colours are mixed with the background's)."""
+"""Opacity from which a surface Gaussian gives its rest normal to the interior under it (fainter ones are
+the reconstruction's soft edges and floaters)."""
 GRANULAR = ("sand", "snow")
-"""The presets whose particles read as hard grains of the photograph's colours once they flow."""
+"""The presets whose grains take the photograph's colours on their rest rays once they flow."""
 GRAIN_OPACITY = 50.0
-"""Opacity of a grain of granular material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
+"""Opacity of a grain of flowing material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
 a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
 over a quarter of its radius (the edge antialiased), where a Gaussian of opacity 1 takes over 1.4 radii
 and a heap of them reads as a blur of one colour."""
@@ -73,26 +73,32 @@ GRAIN_SHADE = 0.13
 scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
 quarter of a grain against the mean over a few grains (0.19 at an eighth, 0.13 at a quarter)."""
 GRAIN_SIZES = (0.6, 1.3)
-"""Range of a granular grain's diameter over the lattice's grain (uniform, then scaled by 1 / sqrt of the
+"""Range of a grain's diameter over the lattice's grain (uniform, then scaled by 1 / sqrt of the
 mean square, so the grains cover on average the area the lattice's grain does): sand's grain sizes
 spread about twofold within a sieve fraction, and grains all of one size on a lattice read as scales."""
 GRAIN_ELONGATION = 1.5
-"""A granular grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
+"""A grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
 2 (a heap of round discs reads as bubbles, not sand)."""
 CAP_RADIUS = 0.6
-"""Radius of a granular grain's lit cap over the grain's (lit_caps): the cap, centred 1 - CAP_RADIUS grain radii
+"""Radius of a grain's lit cap over the grain's (lit_caps): the cap, centred 1 - CAP_RADIUS grain radii
 above the grain's centre, touches the grain's top and stands for its upper part, which faces the sky; the
 rest of the grain, which faces the heap below, is its body."""
 CREVICE_SHADE = 0.5
-"""Brightness of the crevice under a granular grain over the grain's colour (crevices): on scikit-image's gravel
+"""Brightness of the crevice under a grain over the grain's colour (crevices): on scikit-image's gravel
 photograph (data.gravel, grains about 16 px), its brightness blurred by a sixteenth of a grain against the mean
 over a few grains is below 0.54 on 5 % of the pixels and below 0.65 on 10 %: the gaps between the grains."""
 CREVICE_DROP = 0.3
 """How far a grain's crevice lies below the grain, in the grain's reach that way (its alpha-1/2 radius): the
 grain's shadow under a sky above shows as a dark crescent under its lower edge, narrower on its sides, none
 above it (there the grain above's shadow falls)."""
+PORE_RADII = (0.2, 0.5)
+"""Range of the radius of the pore in a torn solid's grain over the grain's (pores, uniform): cavities of several
+sizes, up to a quarter of a grain's picture."""
 EDGE_PX = 2
-"""Pixels inside its silhouette from which the photograph gives a granular particle its colour."""
+"""Pixels inside its silhouette from which the photograph gives a grain its colour (the silhouette's own mix in the
+background)."""
+LUMA = np.array([0.299, 0.587, 0.114])
+"""Rec. 601 luma weights of linear-in-code RGB."""
 FLOW_NEIGHBOURS = 8
 """Nearest particles at rest whose motion relative to a particle tells whether its material flows (Mixing)."""
 HIDDEN_TRANSMITTANCE = 1.0 / 255
@@ -142,48 +148,45 @@ def surface_under(rest_positions: np.ndarray, object_id: np.ndarray, surface_mea
     return under
 
 
-def grain_shapes(volumes: np.ndarray, spacing: np.ndarray, material_id: np.ndarray,
-                 opacities: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(P, 3, 3) covariance (m^2) and (P,) opacity of each particle as a grain of the material, once
-    its material flows (Mixing).
+def grain_shapes(spacing: np.ndarray, granular: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P, 3, 3) covariance (m^2) and (P,) opacity of each particle as a grain of its material, once
+    its material flows (Mixing): sand and snow as they heap, a torn solid's crumbs along its tear.
 
-    Of a granular material (GRANULAR), a hard grain of GRAIN_OPACITY about the size of the lattice:
-    an ellipsoid whose alpha is 1/2 on the surface of volume (4/3) pi (s r)^3, r = GRAIN_SIGMA
-    sqrt(2 ln 2) spacing (so neighbours overlap and a heap is opaque) and s the grain's size, uniform
-    over GRAIN_SIZES scaled so that the mean of s^2 is 1 (the grains cover the area the lattice's
-    would), its long axis GRAIN_ELONGATION times its two short ones, turned at random (seeded: the
-    same for every run). A grain's size does not follow the volume its particle carries: a cell the
-    surface cuts carries a sliver of it, and a surface Gaussian none (stages/simulate/fill.py).
-    Of the other materials, a round soft grain of the particle's own opacity and standard deviation
-    GRAIN_SIGMA V^(1/3), V its volume or, for a massless surface Gaussian, its lattice cell's: a torn
-    face reads as solid material, not as grains.
+    A hard grain of GRAIN_OPACITY about the size of the lattice: an ellipsoid whose alpha is 1/2 on the
+    surface of volume (4/3) pi (s r)^3, r = GRAIN_SIGMA sqrt(2 ln 2) spacing (so neighbours overlap and a
+    heap or a torn face is opaque). Of sand and snow (``granular``), s is the grain's size, uniform over
+    GRAIN_SIZES scaled so that the mean of s^2 is 1 (the grains cover the area the lattice's would), its
+    long axis GRAIN_ELONGATION times its two short ones, turned at random (seeded: the same for every run).
+    Of a solid, s = 1 and the grain is round, the ball of about its cell's volume (r = 0.59 spacings, the
+    cell's ball 0.62), so that a torn piece's outline is its material's: its texture is its pores
+    (:func:`pores`). A grain's size does not follow the volume its particle carries: a cell the surface
+    cuts carries a sliver of it, and a surface Gaussian none (stages/simulate/fill.py). A torn face drawn in
+    soft grains of its share of the volume is a blur a lattice spacing wide.
 
     Args:
-        volumes: (P,) m^3; spacing: (P,) each particle's lattice spacing, m (lattice_spacing; finite
-            where its object has a lattice); material_id: (P,) index into schemas.materials.PRESETS;
-            opacities: (P,).
+        spacing: (P,) each particle's lattice spacing, m (lattice_spacing; inf where its object has no
+            lattice: a covariance of 0 there, which the render replaces by the particle's own);
+        granular: (P,) bool, a particle of sand or snow.
     """
-    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
-    opacity = np.where(granular, GRAIN_OPACITY, opacities)
     low, high = GRAIN_SIZES
     mean_square = (high ** 3 - low ** 3) / (3 * (high - low))  # of s uniform on [low, high]
-    sizes = np.random.default_rng(1).uniform(low, high, len(volumes)) / math.sqrt(mean_square)
+    sizes = np.random.default_rng(1).uniform(low, high, len(spacing)) / math.sqrt(mean_square)
+    sizes = np.where(granular, sizes, 1.0)
     # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
     half_alpha_radius = (GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * sizes
                          * np.where(np.isfinite(spacing), spacing, 0.0))
     hard_sigma = half_alpha_radius / math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
-    axes = GRAIN_ELONGATION ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
-    turns = Rotation.random(len(volumes), random_state=0).as_matrix()
-    hard = np.einsum("pij,j,pkj->pik", turns, axes ** 2, turns) * hard_sigma[:, None, None] ** 2
-    own = np.where(volumes > 0, volumes, np.where(np.isfinite(spacing), spacing, 0.0) ** 3)
-    soft = np.eye(3) * (GRAIN_SIGMA * np.cbrt(own))[:, None, None] ** 2
-    return np.where(granular[:, None, None], hard, soft), opacity
+    elongation = np.where(granular, GRAIN_ELONGATION, 1.0)[:, None]
+    axes = elongation ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
+    turns = Rotation.random(len(spacing), random_state=0).as_matrix()
+    hard = np.einsum("pij,pj,pkj->pik", turns, axes ** 2, turns) * hard_sigma[:, None, None] ** 2
+    return hard, np.full(len(spacing), GRAIN_OPACITY)
 
 
-def grain_offsets(spacing: np.ndarray, material_id: np.ndarray) -> np.ndarray:
-    """(P, 3) m: where a granular particle's grain is drawn, from its position, once its material
-    flows (Mixing): uniform over the lattice cell centred on it (seeded: the same for every run);
-    0 for the other materials and where there is no lattice (spacing inf).
+def grain_offsets(spacing: np.ndarray) -> np.ndarray:
+    """(P, 3) m: where a particle's grain is drawn, from its position, once its material flows
+    (Mixing): uniform over the lattice cell centred on it (seeded: the same for every run); 0 where
+    there is no lattice (spacing inf).
 
     The particles sit on the simulation's lattice, and a heap near the camera would show it as a
     honeycomb of grains. A shift uniform over the cell puts each grain anywhere in its cell: the
@@ -191,11 +194,10 @@ def grain_offsets(spacing: np.ndarray, material_id: np.ndarray) -> np.ndarray:
     |E exp(i k d)|^2 = prod sinc^2(k_j s / 2) = 0 (no lattice peak).
 
     Args:
-        spacing: (P,) m (lattice_spacing); material_id: (P,) index into schemas.materials.PRESETS.
+        spacing: (P,) m (lattice_spacing).
     """
-    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR]) & np.isfinite(spacing)
     shift = np.random.default_rng(2).uniform(-0.5, 0.5, (len(spacing), 3))
-    return np.where(granular[:, None], shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None], 0.0)
+    return np.where(np.isfinite(spacing)[:, None], shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None], 0.0)
 
 
 def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray,
@@ -230,32 +232,56 @@ def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: n
     return colours
 
 
-def grain_colours(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
-    """(P, 3) each particle's colour as a grain: for granular materials (GRANULAR) ``colours`` (P, 3)
-    in [0, 1] scaled by 1 + GRAIN_SHADE n, n a standard normal number cut at +-2 (seeded: the same for
-    every run), and no further than the brightest channel reaches 1, so that every grain keeps its
-    colour's hue; the others' colours unchanged. A heap of grains of one colour is not one flat
-    colour: each grain's facets catch the light differently."""
-    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
-    shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(material_id)), -2, 2)
+def crumb_colours(object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(N, 3) in [0, 1]: the colour of each point's object where it opens (a torn face, its crumbs): the
+    mean of the photograph's colours over the object's pixels at least EDGE_PX inside its silhouette whose
+    luma (Rec. 601) is at least the object's median; black for an object the photograph does not show.
+
+    The photograph shows an object's surface shaded (its side away from the light, the dark lines of a
+    crust's texture, the cavities between its bumps): the mean over all its pixels is darker than its
+    material. A freshly opened face has none of that surface's weathering, and its own shading comes from
+    its grains and the pores between them (grain_relief, crevices): its colour is the object's lit half.
+
+    Args:
+        object_id: (N,); photo: (H, W, 3) u8 RGB; labels: (H, W) 0 background, k + 1 object k
+            (gaussians.h5's mask).
+    """
+    colours = np.zeros((len(object_id), 3))
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1))
+    for k in np.unique(object_id):
+        own = (labels == k + 1).astype(np.uint8)
+        inner = cv2.erode(own, disc)
+        pixels = photo[(inner if inner.any() else own) > 0].astype(np.float64) / 255.0
+        if len(pixels) == 0:
+            continue
+        luma = pixels @ LUMA
+        colours[object_id == k] = pixels[luma >= np.median(luma)].mean(0)
+    return colours
+
+
+def grain_colours(colours: np.ndarray) -> np.ndarray:
+    """(P, 3) each particle's colour as a grain: ``colours`` (P, 3) in [0, 1] scaled by 1 + GRAIN_SHADE n,
+    n a standard normal number cut at +-2 (seeded: the same for every run), and no further than the
+    brightest channel reaches 1, so that every grain keeps its colour's hue. A heap of grains of one
+    colour, or a torn face, is not one flat colour: each grain's facets catch the light differently."""
+    shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(colours)), -2, 2)
     shade = np.minimum(shade, 1 / np.maximum(colours.max(1), 1e-6))
-    return np.where(granular[:, None], colours * shade[:, None], colours)
+    return colours * shade[:, None]
 
 
-def grain_relief(colours: np.ndarray, material_id: np.ndarray) -> np.ndarray:
-    """(P,) how much brighter the top of a granular grain is than its mean, per grain radius of height:
+def grain_relief(colours: np.ndarray) -> np.ndarray:
+    """(P,) how much brighter the top of a grain is than its mean, per grain radius of height:
     k = (1 - a) / (1 + a), a the luma (Rec. 601) of its colour ``colours`` (P, 3) in [0, 1] taken as the
-    albedo of the heap around it; 0 for the other materials.
+    albedo of the heap or torn face around it.
 
     A Lambertian grain of normal n under a sky of radiance L above and a heap of the grain's albedo a
     below (lit by the same sky) receives pi L ((1 + n.u) / 2 + a (1 - n.u) / 2), u up. Seen from the
     side, n.u is the height y over the grain's image in radii (mean 0), so its shading over its mean is
     1 + k y: a dark grain's top and underside differ most; a white grain (snow) is lit alike all over
     (a relief under 1/255, which moves no channel by a grey level, counts as 0: no cap)."""
-    granular = np.isin(material_id, [PRESETS.index(p) for p in GRANULAR])
-    albedo = np.clip(colours @ np.array([0.299, 0.587, 0.114]), 0.0, 1.0)
+    albedo = np.clip(colours @ LUMA, 0.0, 1.0)
     relief = (1 - albedo) / (1 + albedo)
-    return np.where(granular & (relief >= 1 / 255), relief, 0.0)  # less moves no channel by a grey level
+    return np.where(relief >= 1 / 255, relief, 0.0)  # less moves no channel by a grey level
 
 
 def grain_reach(means: torch.Tensor, covariances: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
@@ -300,8 +326,8 @@ def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
 
 def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
              shadowed: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """The shadowed crevices under the C grains whose ``shadowed`` (P,) weight is above 0 (granular grains, by
-    how far their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities and (C, 3)
+    """The shadowed crevices under the C grains whose ``shadowed`` (P,) weight is above 0 (grains, by how far
+    their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities and (C, 3)
     colours, drawn with the grains.
 
     Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as drawn this
@@ -317,6 +343,62 @@ def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
     crevice_means = means[shown] - (CREVICE_DROP * reach_up)[:, None] * up + reach_view[:, None] * view
     weight = shadowed[shown].to(opacities.dtype)
     return crevice_means, grain, opacities[shown] * weight, colours[shown] * CREVICE_SHADE
+
+
+def pores(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
+          porous: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """The pores of a torn solid's face, one in each of the C grains whose ``porous`` (P,) weight is above 0
+    (a solid's grains, by how far their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,)
+    opacities and (C, 3) colours, drawn with the grains.
+
+    Broken solid material (bread's crumb, a cake's, a cracked jelly's) is a continuous matrix with cavities in
+    it, not a heap of grains with gaps under them. Of each grain (means (P, 3), covariances (P, 3, 3),
+    opacities (P,), colours (P, 3) in [0, 1], as drawn this frame), the pore is the grain shrunk to a size
+    uniform over PORE_RADII of its own, anywhere inside it (a point uniform in the ball, seeded per particle:
+    the same for every frame and run; a pore centred in every grain reads as a ring), brought a hundredth of
+    its reach nearer the camera so that it sorts in front of its own grain (as a cap does), in the grain's
+    colour times CREVICE_SHADE (a cavity sees little light; the hue kept), its opacity the grain's times the
+    weight (none while the body holds its shape). A grain drawn in front of it covers it, as the matrix in
+    front of a cavity hides it."""
+    rng = np.random.default_rng(3)
+    size = torch.as_tensor(rng.uniform(*PORE_RADII, len(means)), dtype=means.dtype, device=means.device)
+    direction = rng.standard_normal((len(means), 3))
+    direction *= rng.uniform(0, 1, (len(means), 1)) ** (1 / 3) / np.linalg.norm(direction, axis=1, keepdims=True)
+    shown = torch.nonzero(porous > 0)[:, 0]
+    grain, size = covariances[shown], size[shown]
+    _, view, _, reach_view = grain_reach(means[shown], grain, camera)
+    # the grain's half-alpha ellipsoid is the unit ball under its covariance's square root, times edge
+    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
+    root = torch.linalg.cholesky(grain + 1e-18 * torch.eye(3, dtype=grain.dtype, device=grain.device))
+    inside = torch.as_tensor(direction, dtype=grain.dtype, device=grain.device)[shown]
+    pore_means = (means[shown] + edge * (1 - size)[:, None] * (root @ inside[:, :, None])[..., 0]
+                  - (0.01 * reach_view)[:, None] * view)
+    weight = porous[shown].to(opacities.dtype)
+    return (pore_means, size[:, None, None] ** 2 * grain, opacities[shown] * weight,
+            colours[shown] * CREVICE_SHADE)
+
+
+def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
+    """(P, 3, 3) m^2: the covariances (P, 3, 3) of the particles at means (P, 3), world, m, with splat's
+    dilation (DILATION_PX2 added to every projected covariance) taken back out of the hard grains, by their
+    weight ``hard`` (P,) in [0, 1] (how far their material flows): DILATION_PX2 (z / f)^2 off every axis, at
+    most 3/4 of the smallest.
+
+    The dilation is an antialiasing filter for soft Gaussians. It grows a hard grain's picture, whose edge
+    is at alpha 1/2, by about 0.3 px / its radius in px: a grain 1.2 px across is drawn 2 px across, and at
+    2 px a lattice spacing the pieces of a torn ball are joined across a gap of a pixel."""
+    weight = torch.nonzero(hard > 0)[:, 0]
+    if len(weight) == 0:
+        return covariances
+    z = to_camera(means[weight], camera.world_to_camera)[:, 2].clamp_min(1e-9)
+    dilation = DILATION_PX2 * (z / float(camera.K[0, 0])) ** 2
+    grains = covariances[weight]
+    smallest = torch.linalg.eigvalsh(grains)[:, 0].clamp_min(0)
+    taken = hard[weight].to(grains.dtype) * torch.minimum(dilation.to(grains.dtype), 0.75 * smallest)
+    eye = torch.eye(3, dtype=grains.dtype, device=grains.device)
+    out = covariances.clone()
+    out[weight] = grains - taken[:, None, None] * eye
+    return out
 
 
 class Mixing:

@@ -30,9 +30,9 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, crevices, grain_colours, grain_offsets,
-                       grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps, rest_ray_colours,
-                       surface_under)
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, crevices, crumb_colours, grain_colours,
+                       grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
+                       pores, rest_ray_colours, surface_under, undilated)
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
                          source_roughness, source_spread, surface_normals, visibility)
@@ -55,19 +55,21 @@ class Particles(NamedTuple):
     rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_offsets (P, 3), m, where a grain is
     drawn from its particle (interior.grain_offsets); grain_covariances (P, 3, 3), m^2,
     grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
-    its material flows (interior.Mixing): a soft round grain of its share of the volume in its own
-    colour, or for sand and snow a hard grain of the lattice's size in the photograph's colour on its
-    rest ray, shaded (interior.grain_shapes, grain_colours; its rest covariance and opacity where its
-    object has no lattice); opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show
-    at rest (interior.hidden_at_rest), which is transparent until its material flows, else 1;
-    colors (P, 3) at rest (a fill particle: that of the surface it lies under, or for sand and snow the
+    its material flows (interior.Mixing): a hard grain of the lattice's size, for sand and snow in the
+    photograph's colour on its rest ray, else in its own colour, shaded (interior.grain_shapes,
+    grain_colours; its rest covariance, opacity and colour where its object has no lattice);
+    opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
+    (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
+    at rest (a fill particle: its object's material, interior.crumb_colours, or for sand and snow the
     photograph's on its rest ray); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
     relief (P,) how much a grain of sand or snow is lit from above once its material flows
-    (interior.grain_relief; 0 for the other materials); granular (P,) 1 for a grain of sand or snow (of an
-    object with a lattice), which shows a shadowed crevice under it once its material flows
-    (interior.crevices), else 0.
+    (interior.grain_relief; 0 for the other materials); grains (P,) 1 for a particle of an object with a
+    lattice, a hard grain once its material flows (interior.undilated), else 0; granular (P,) 1 for a grain
+    of sand or snow (of an object with a lattice), which shows a shadowed crevice under it once its material
+    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a solid (of an object with a lattice), which
+    shows a pore in it once its material flows (interior.pores), else 0.
     """
 
     rest_means: torch.Tensor
@@ -84,7 +86,9 @@ class Particles(NamedTuple):
     rest_normals: torch.Tensor
     surface: torch.Tensor
     relief: torch.Tensor
+    grains: torch.Tensor
     granular: torch.Tensor
+    porous: torch.Tensor
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(P, 3) drawn positions (m), (P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,)
@@ -124,34 +128,42 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
-    fill_colors = torch.where(t(granular[G:])[:, None], on_rest_ray[G:], colors[under])
+    material = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
+    fill_colors = torch.where(t(granular[G:])[:, None], on_rest_ray[G:], material)
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
     rest_covariances = torch.cat([covariances, sigma[:, None, None] ** 2 * eye])
     opacities = torch.cat([opacities, torch.full((N,), INTERIOR_OPACITY, dtype=opacities.dtype, device=device)])
-    grain_shape, grain_opacities = grain_shapes(trajectories.volumes, spacing.cpu().numpy(), trajectories.material_id,
-                                                opacities.cpu().numpy())
+    grain_shape, grain_opacities = grain_shapes(spacing.cpu().numpy(), granular)
+    has_lattice = spacing.isfinite()
     rest_colors = torch.cat([colors, fill_colors])
-    grain_from = torch.where(t(granular)[:, None], on_rest_ray, rest_colors).cpu().numpy()
-    shaded_grains = grain_colours(grain_from, trajectories.material_id)
+    grain_from = torch.where(t(granular)[:, None], on_rest_ray, rest_colors)
+    # a heap's grains catch the light each its own way; a torn solid's are one matrix, its pores its texture
+    shaded_grains = torch.where((has_lattice & t(granular))[:, None],
+                                t(grain_colours(grain_from.cpu().numpy())).to(colors.dtype), grain_from)
     rest_means = torch.cat([means, fill_means])
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
-        grain_offsets=t(grain_offsets(spacing.cpu().numpy(), trajectories.material_id)),
-        grain_covariances=torch.where(spacing.isfinite()[:, None, None], t(grain_shape).to(covariances.dtype),
+        # a heap's grains lie anywhere in their cells; a torn solid's stay on its lattice, so that its pieces'
+        # outlines stay where the material tore
+        grain_offsets=torch.where(t(granular)[:, None], t(grain_offsets(spacing.cpu().numpy())), 0.0),
+        grain_covariances=torch.where(has_lattice[:, None, None], t(grain_shape).to(covariances.dtype),
                                       rest_covariances),
         mixing=Mixing(rest_means, trajectories.object_id, spacing),
         opacities=opacities,
-        grain_opacities=torch.where(spacing.isfinite(), t(grain_opacities).to(opacities.dtype), opacities),
+        grain_opacities=torch.where(has_lattice, t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
         colors=rest_colors,
-        grain_colors=t(shaded_grains).to(colors.dtype),
+        grain_colors=shaded_grains,
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
         rest_normals=torch.cat([normals, normals[under]]),
         surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
-        relief=t(grain_relief(shaded_grains, trajectories.material_id)),
-        granular=(t(granular) & spacing.isfinite()).to(opacities.dtype))
+        relief=torch.where(has_lattice & t(granular), t(grain_relief(shaded_grains.cpu().numpy())).to(opacities.dtype),
+                           0.0),
+        grains=has_lattice.to(opacities.dtype),
+        granular=(has_lattice & t(granular)).to(opacities.dtype),
+        porous=(has_lattice & ~t(granular)).to(opacities.dtype))
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
@@ -175,17 +187,22 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
         for frame in range(T):
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
+            covariances = undilated(means, covariances, particles.grains * particles.mixing.so_far, camera)
             # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body,
-            # over the shadowed crevice under it
+            # over the shadowed crevice under it, and each grain of a torn solid with a pore in it
             bodies, cap_means, cap_covariances, cap_opacities, cap_colors = lit_caps(
                 means, covariances, opacities, colors, particles.relief * particles.mixing.so_far, camera)
             crevice_means, crevice_covariances, crevice_opacities, crevice_colors = crevices(
                 means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
+            pore_means, pore_covariances, pore_opacities, pore_colors = pores(
+                means, covariances, opacities, colors, particles.porous * particles.mixing.so_far, camera)
             features = torch.cat([torch.cat([bodies, surface_weights[:, None].to(colors.dtype)], 1),
-                                  torch.nn.functional.pad(torch.cat([cap_colors, crevice_colors]), (0, 1))])
-            render = splat.rasterize(torch.cat([means, cap_means, crevice_means]),
-                                     torch.cat([opacities, cap_opacities, crevice_opacities]), features, camera,
-                                     covariances=torch.cat([covariances, cap_covariances, crevice_covariances]))
+                                  torch.nn.functional.pad(torch.cat([cap_colors, crevice_colors, pore_colors]),
+                                                          (0, 1))])
+            render = splat.rasterize(torch.cat([means, cap_means, crevice_means, pore_means]),
+                                     torch.cat([opacities, cap_opacities, crevice_opacities, pore_opacities]), features,
+                                     camera, covariances=torch.cat([covariances, cap_covariances, crevice_covariances,
+                                                                    pore_covariances]))
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA

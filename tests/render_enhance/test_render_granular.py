@@ -142,17 +142,15 @@ def test_a_grain_is_lit_from_above():
     picture and over the rest of its picture, its brightness over its colour's is the sphere's shading
     averaged over those pixels (within 0.02: the cap's edge is antialiased over a few pixels), and over
     the whole grain 1 (within 2 %: it keeps its colour).
-    A white grain (snow) has no relief, nor has jelly: no cap, colour unchanged."""
+    A white grain (snow) has no relief: no cap, colour unchanged."""
     colour = np.array([[0.3, 0.45, 0.2]])
-    sand = np.array([M.PRESETS.index("sand")])
-    relief = grain_relief(colour, sand)
+    relief = grain_relief(colour)
     albedo = colour[0] @ [0.299, 0.587, 0.114]
     assert relief[0] == pytest.approx((1 - albedo) / (1 + albedo))
-    np.testing.assert_array_equal(grain_relief(np.ones((1, 3)), sand), 0.0)
-    np.testing.assert_array_equal(grain_relief(colour, np.array([M.PRESETS.index("jelly")])), 0.0)
+    np.testing.assert_array_equal(grain_relief(np.ones((1, 3))), 0.0)
     size, focal, spacing = 201, 2000.0, 0.03
     camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
-    shape, opacity = grain_shapes(np.full(1, spacing ** 3), np.full(1, spacing), sand, np.ones(1))
+    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
     shape = np.eye(3) * np.cbrt(np.linalg.det(shape[0]))  # a round grain, as the sphere
     t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
     means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape[None]), t(opacity), t(colour)
@@ -233,14 +231,12 @@ def test_grain_shades_keep_the_hue():
     and the factors spread by about GRAIN_SHADE where no channel caps them."""
     rng = np.random.default_rng(2)
     colours = rng.uniform(0.05, 1.0, (4000, 3))
-    sand = np.full(4000, M.PRESETS.index("sand"))
-    shaded = grain_colours(colours, sand)
+    shaded = grain_colours(colours)
     factor = shaded / colours
     np.testing.assert_allclose(factor, factor[:, :1].repeat(3, 1), rtol=1e-9)
     assert shaded.max() <= 1 + 1e-12
     dark = colours.max(1) < 0.6  # no cap within the factors' +-2 GRAIN_SHADE
     assert abs(factor[dark, 0].std() / GRAIN_SHADE - 1) < 0.15
-    np.testing.assert_array_equal(grain_colours(colours, np.full(4000, M.PRESETS.index("jelly"))), colours)
 
 
 def test_grains_show_no_lattice():
@@ -248,19 +244,17 @@ def test_grains_show_no_lattice():
     their cells: the structure factor of their centres, |sum exp(i k x)|^2 / N, at the lattice's
     reciprocal vectors k (2 pi / s along an axis, a face diagonal, a body diagonal) is that of
     independent points (about 1, exponentially distributed), where the lattice itself gives N. Every
-    shift stays within the cell; jelly and a body with no lattice (spacing inf) are not shifted."""
+    shift stays within the cell; a body with no lattice (spacing inf) is not shifted."""
     s, n = 0.004, 16
     lattice = s * np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    sand = np.full(len(lattice), M.PRESETS.index("sand"))
-    offsets = grain_offsets(np.full(len(lattice), s), sand)
+    offsets = grain_offsets(np.full(len(lattice), s))
     assert np.abs(offsets).max() <= s / 2
     for direction in ([1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 0], [0, 1, -1], [1, 1, 1]):
         k = 2 * np.pi / s * np.array(direction, float)
         peak = lambda x: np.abs(np.exp(1j * x @ k).sum()) ** 2 / len(x)  # noqa: E731
         assert peak(lattice) > 0.99 * len(lattice)
         assert peak(lattice + offsets) < 15, f"a lattice peak along {direction}"
-    np.testing.assert_array_equal(grain_offsets(np.full(8, s), np.full(8, M.PRESETS.index("jelly"))), 0.0)
-    np.testing.assert_array_equal(grain_offsets(np.full(8, np.inf), np.full(8, M.PRESETS.index("sand"))), 0.0)
+    np.testing.assert_array_equal(grain_offsets(np.full(8, np.inf)), 0.0)
 
 
 def test_a_grain_shades_the_gap_under_it():
@@ -272,10 +266,9 @@ def test_a_grain_shades_the_gap_under_it():
     depth covers its crevice (the crevice sorts behind both). A grain whose material holds its shape
     (weight 0) has none."""
     colour = np.array([[0.8, 0.5, 0.2]])
-    sand = np.array([M.PRESETS.index("sand")])
     size, focal, spacing = 201, 2000.0, 0.03
     camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
-    shape, opacity = grain_shapes(np.full(1, spacing ** 3), np.full(1, spacing), sand, np.ones(1))
+    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
     t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
     means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape), t(opacity), t(colour)
     crevice = crevices(means, covariances, opacities, colours, t([1.0]), camera)
