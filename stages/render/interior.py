@@ -63,6 +63,9 @@ OPAQUE_SURFACE = 0.5
 the reconstruction's soft edges and floaters)."""
 GRANULAR = ("sand", "snow")
 """The presets whose grains take the photograph's colours on their rest rays once they flow."""
+POROUS = ("fracture", "foam")
+"""The presets whose broken or torn material shows pores (pores): crumb, a cake's or a sponge's inside. A ductile
+solid (jelly, metal, plasticine) that flows stays a continuous material of its colours."""
 GRAIN_OPACITY = 50.0
 """Opacity of a grain of flowing material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
 a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1

@@ -30,12 +30,13 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, Mixing, crevices, crumb_colours, grain_colours,
+from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
                        grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
                        pores, rest_ray_colours, surface_under, undilated)
+from .silhouette import narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
-                         facing_normals, inverse_deformation, map_moments, rest_visibility, source_points,
-                         source_roughness, source_spread, surface_normals, visibility)
+                         facing_normals, full_camera, inverse_deformation, map_moments, rest_visibility,
+                         source_points, source_roughness, source_spread, surface_normals, visibility)
 
 log = logging.getLogger("physmotion.render")
 
@@ -113,6 +114,9 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     G = gaussians.means.shape[0]
     means, opacities, colors = t(gaussians.means), t(gaussians.opacities), t(gaussians.colors)
     covariances = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
+    # the photograph's objects end at their mask: what a Gaussian draws past it is the background's
+    size, fade = narrowed_to_mask(means, covariances, gaussians.object_id, gaussians.mask, full_camera(gaussians))
+    covariances, opacities = covariances * size[:, None, None] ** 2, opacities * fade
     rest_seen = rest_visibility(means, covariances, opacities, gaussians)
     normals = surface_normals(means)
     fill = ~trajectories.is_gaussian
@@ -125,6 +129,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
                                    camera)
     N = len(sigma)
     granular = np.isin(trajectories.material_id, [PRESETS.index(p) for p in GRANULAR])
+    porous = np.isin(trajectories.material_id, [PRESETS.index(p) for p in POROUS])
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
@@ -138,7 +143,10 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     grain_shape, grain_opacities = grain_shapes(spacing.cpu().numpy(), granular)
     has_lattice = spacing.isfinite()
     rest_colors = torch.cat([colors, fill_colors])
-    grain_from = torch.where(t(granular)[:, None], on_rest_ray, rest_colors)
+    # a grain shows the material at its place: a surface Gaussian's own colour may hold the background it was
+    # fitted beside (the silhouette's), the photograph 2 px inside its object's does not
+    surface_grain = t(granular | trajectories.is_gaussian)
+    grain_from = torch.where(surface_grain[:, None], on_rest_ray, rest_colors)
     # a heap's grains catch the light each its own way; a torn solid's are one matrix, its pores its texture
     shaded_grains = torch.where((has_lattice & t(granular))[:, None],
                                 t(grain_colours(grain_from.cpu().numpy())).to(colors.dtype), grain_from)
@@ -163,7 +171,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
                            0.0),
         grains=has_lattice.to(opacities.dtype),
         granular=(has_lattice & t(granular)).to(opacities.dtype),
-        porous=(has_lattice & ~t(granular)).to(opacities.dtype))
+        porous=(has_lattice & t(porous)).to(opacities.dtype))
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,
