@@ -97,6 +97,11 @@ above it (there the grain above's shadow falls)."""
 PORE_RADII = (0.2, 0.5)
 """Range of the radius of the pore in a torn solid's grain over the grain's (pores, uniform): cavities of several
 sizes, up to a quarter of a grain's picture."""
+FACETS = 2
+"""Faces drawn on each grain of sand or snow (facets)."""
+FACET_RADIUS = 0.55
+"""Radius of a grain's face over the grain's (facets): about a third of its picture each, two of them and the
+grain's own colour between them."""
 EDGE_PX = 2
 """Pixels inside its silhouette from which the photograph gives a grain its colour (the silhouette's own mix in the
 background)."""
@@ -348,37 +353,72 @@ def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
     return crevice_means, grain, opacities[shown] * weight, colours[shown] * CREVICE_SHADE
 
 
+def inlays(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, weight: torch.Tensor,
+           size: np.ndarray, place: np.ndarray, nearer: float, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """Smaller copies of the C grains whose ``weight`` (P,) is above 0, drawn over them: (C, 3) means (m), (C, 3, 3)
+    covariances (m^2) and (C,) opacities (the grain's times the weight).
+
+    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), as drawn this frame), the inlay is the
+    grain shrunk to ``size`` (P,) of its own, centred at ``place`` (P, 3) in the grain's own frame (the unit ball
+    its half-alpha ellipsoid is the image of), brought ``nearer`` of its reach towards the camera so that it
+    sorts in front of its grain (as a cap does)."""
+    shown = torch.nonzero(weight > 0)[:, 0]
+    grain = covariances[shown]
+    scale = torch.as_tensor(size, dtype=grain.dtype, device=grain.device)[shown]
+    _, view, _, reach_view = grain_reach(means[shown], grain, camera)
+    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # the half-alpha radius in standard deviations
+    root = torch.linalg.cholesky(grain + 1e-18 * torch.eye(3, dtype=grain.dtype, device=grain.device))
+    at = torch.as_tensor(place, dtype=grain.dtype, device=grain.device)[shown]
+    inlay_means = means[shown] + edge * (root @ at[:, :, None])[..., 0] - (nearer * reach_view)[:, None] * view
+    return inlay_means, scale[:, None, None] ** 2 * grain, opacities[shown] * weight[shown].to(opacities.dtype)
+
+
 def pores(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
           porous: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
     """The pores of a torn solid's face, one in each of the C grains whose ``porous`` (P,) weight is above 0
     (a solid's grains, by how far their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,)
     opacities and (C, 3) colours, drawn with the grains.
 
-    Broken solid material (bread's crumb, a cake's, a cracked jelly's) is a continuous matrix with cavities in
-    it, not a heap of grains with gaps under them. Of each grain (means (P, 3), covariances (P, 3, 3),
-    opacities (P,), colours (P, 3) in [0, 1], as drawn this frame), the pore is the grain shrunk to a size
-    uniform over PORE_RADII of its own, anywhere inside it (a point uniform in the ball, seeded per particle:
-    the same for every frame and run; a pore centred in every grain reads as a ring), brought a hundredth of
-    its reach nearer the camera so that it sorts in front of its own grain (as a cap does), in the grain's
-    colour times CREVICE_SHADE (a cavity sees little light; the hue kept), its opacity the grain's times the
-    weight (none while the body holds its shape). A grain drawn in front of it covers it, as the matrix in
-    front of a cavity hides it."""
+    Broken solid material (bread's crumb, a cake's, a sponge's) is a continuous matrix with cavities in it, not
+    a heap of grains with gaps under them. Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,),
+    colours (P, 3) in [0, 1], as drawn this frame), the pore is an inlay (:func:`inlays`) of a size uniform over
+    PORE_RADII of the grain's, anywhere inside it (a point uniform in the ball shrunk by that size, seeded per
+    particle: the same for every frame and run; a pore centred in every grain reads as a ring), in the grain's
+    colour times CREVICE_SHADE (a cavity sees little light; the hue kept), none while the body holds its shape.
+    A grain drawn in front of it covers it, as the matrix in front of a cavity hides it."""
     rng = np.random.default_rng(3)
-    size = torch.as_tensor(rng.uniform(*PORE_RADII, len(means)), dtype=means.dtype, device=means.device)
-    direction = rng.standard_normal((len(means), 3))
-    direction *= rng.uniform(0, 1, (len(means), 1)) ** (1 / 3) / np.linalg.norm(direction, axis=1, keepdims=True)
-    shown = torch.nonzero(porous > 0)[:, 0]
-    grain, size = covariances[shown], size[shown]
-    _, view, _, reach_view = grain_reach(means[shown], grain, camera)
-    # the grain's half-alpha ellipsoid is the unit ball under its covariance's square root, times edge
-    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
-    root = torch.linalg.cholesky(grain + 1e-18 * torch.eye(3, dtype=grain.dtype, device=grain.device))
-    inside = torch.as_tensor(direction, dtype=grain.dtype, device=grain.device)[shown]
-    pore_means = (means[shown] + edge * (1 - size)[:, None] * (root @ inside[:, :, None])[..., 0]
-                  - (0.01 * reach_view)[:, None] * view)
-    weight = porous[shown].to(opacities.dtype)
-    return (pore_means, size[:, None, None] ** 2 * grain, opacities[shown] * weight,
-            colours[shown] * CREVICE_SHADE)
+    size = rng.uniform(*PORE_RADII, len(means))
+    place = rng.standard_normal((len(means), 3))
+    place *= ((1 - size) * rng.uniform(0, 1, len(means)) ** (1 / 3) / np.linalg.norm(place, axis=1))[:, None]
+    pore_means, pore_covariances, pore_opacities = inlays(means, covariances, opacities, porous, size, place, 0.01,
+                                                          camera)
+    return pore_means, pore_covariances, pore_opacities, colours[porous > 0] * CREVICE_SHADE
+
+
+def facets(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
+           faceted: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """The faces of the C grains whose ``faceted`` (P,) weight is above 0 (sand and snow, by how far their material
+    flows), FACETS of each: (F C, 3) means (m), (F C, 3, 3) covariances (m^2), (F C,) opacities and (F C, 3)
+    colours, drawn with the grains.
+
+    A grain of sand is angular: its faces catch the light each its own way, and its outline is not an ellipse.
+    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as drawn this
+    frame), a face is an inlay (:func:`inlays`) FACET_RADIUS of its size, centred in a random direction (seeded
+    per particle: the same for every frame and run) at 1 - FACET_RADIUS / 2 of its radius, so that it stands out
+    of the outline by half its own, in the grain's colour times 1 + GRAIN_SHADE n (n normal, cut at +-2; capped
+    where a channel would pass 1: the hue kept, as grain_colours)."""
+    rng = np.random.default_rng(4)
+    shown = faceted > 0
+    parts = []
+    for face in range(FACETS):
+        place = rng.standard_normal((len(means), 3))
+        place *= ((1 - FACET_RADIUS / 2) / np.linalg.norm(place, axis=1))[:, None]
+        shade = torch.as_tensor(1 + GRAIN_SHADE * np.clip(rng.standard_normal(len(means)), -2, 2),
+                                dtype=colours.dtype, device=colours.device)[shown]
+        lit = colours[shown] * torch.minimum(shade, 1 / colours[shown].amax(1).clamp_min(1e-6))[:, None]
+        parts.append((*inlays(means, covariances, opacities, faceted, np.full(len(means), FACET_RADIUS), place,
+                              0.02 * (face + 1), camera), lit))
+    return tuple(torch.cat(part) for part in zip(*parts))
 
 
 def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor, camera: splat.Camera) -> torch.Tensor:

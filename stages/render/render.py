@@ -31,7 +31,7 @@ from schemas.materials import PRESETS
 from schemas.video import even_size
 
 from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
-                       grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
+                       facets, grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
                        pores, rest_ray_colours, surface_under, undilated)
 from .silhouette import narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
@@ -197,20 +197,24 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
             covariances = undilated(means, covariances, particles.grains * particles.mixing.so_far, camera)
             # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body,
-            # over the shadowed crevice under it, and each grain of a torn solid with a pore in it
+            # over the shadowed crevice under it, with its faces over it, and each grain of a torn solid with
+            # a pore in it
             bodies, cap_means, cap_covariances, cap_opacities, cap_colors = lit_caps(
                 means, covariances, opacities, colors, particles.relief * particles.mixing.so_far, camera)
             crevice_means, crevice_covariances, crevice_opacities, crevice_colors = crevices(
                 means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
             pore_means, pore_covariances, pore_opacities, pore_colors = pores(
                 means, covariances, opacities, colors, particles.porous * particles.mixing.so_far, camera)
+            face_means, face_covariances, face_opacities, face_colors = facets(
+                means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
+            extra_colors = torch.cat([cap_colors, crevice_colors, pore_colors, face_colors])
             features = torch.cat([torch.cat([bodies, surface_weights[:, None].to(colors.dtype)], 1),
-                                  torch.nn.functional.pad(torch.cat([cap_colors, crevice_colors, pore_colors]),
-                                                          (0, 1))])
-            render = splat.rasterize(torch.cat([means, cap_means, crevice_means, pore_means]),
-                                     torch.cat([opacities, cap_opacities, crevice_opacities, pore_opacities]), features,
-                                     camera, covariances=torch.cat([covariances, cap_covariances, crevice_covariances,
-                                                                    pore_covariances]))
+                                  torch.nn.functional.pad(extra_colors, (0, 1))])
+            render = splat.rasterize(
+                torch.cat([means, cap_means, crevice_means, pore_means, face_means]),
+                torch.cat([opacities, cap_opacities, crevice_opacities, pore_opacities, face_opacities]), features,
+                camera, covariances=torch.cat([covariances, cap_covariances, crevice_covariances, pore_covariances,
+                                               face_covariances]))
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA

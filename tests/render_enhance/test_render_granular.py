@@ -20,8 +20,9 @@ from schemas.scene import PhysicsConfig
 from schemas.solid import solid_fields
 from stages.enhance.compositing import blend_over_background, unpremultiply
 from stages.enhance.flow import enhance_frames
-from stages.render.interior import (CREVICE_SHADE, EDGE_PX, GRAIN_SHADE, crevices, grain_colours, grain_offsets,
-                                    grain_relief, grain_shapes, lit_caps, rest_ray_colours)
+from stages.render.interior import (CREVICE_SHADE, EDGE_PX, FACET_RADIUS, FACETS, GRAIN_SHADE, crevices, facets,
+                                    grain_colours, grain_offsets, grain_relief, grain_shapes, lit_caps,
+                                    rest_ray_colours)
 from stages.render.render import render_camera, render_video, rendered_particles
 from stages.simulate.simulation import Simulation
 
@@ -295,3 +296,36 @@ def test_a_grain_shades_the_gap_under_it():
     assert lower.sum() > 100
     np.testing.assert_allclose(two.features.numpy()[lower], 0.99 * np.tile(colour, (lower.sum(), 1)), atol=0.01)
     assert len(crevices(means, covariances, opacities, colours, t([0.0]), camera)[0]) == 0
+
+
+def test_a_grain_shows_its_faces():
+    """A grain of sand alone, face-on, drawn with its faces (facets): each face is the grain's shape times
+    FACET_RADIUS, in the grain's colour times one factor (the hue kept, at most 1); its picture (alpha >= 1/2)
+    reaches past the grain's own ellipse (float64: x^T C^-1 x <= 2 ln(2 opacity) on the image plane), its
+    outline no longer an ellipse; at least a fifth of the grain's own picture shows a face's shade, not the
+    grain's colour (more than 2 levels off). A grain whose material holds its shape (weight 0) has none."""
+    colour = np.array([[0.8, 0.5, 0.2]])
+    size, focal, spacing = 201, 2000.0, 0.03
+    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
+    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape), t(opacity), t(colour)
+    face_means, face_covariances, face_opacities, face_colours = facets(means, covariances, opacities, colours,
+                                                                        t([1.0]), camera)
+    assert len(face_means) == FACETS
+    np.testing.assert_allclose(face_covariances.numpy(), FACET_RADIUS ** 2 * np.repeat(shape, FACETS, 0), rtol=1e-5)
+    factor = face_colours.numpy() / colour
+    np.testing.assert_allclose(factor, factor[:, :1].repeat(3, 1), rtol=1e-5)
+    assert face_colours.numpy().max() <= 1 + 1e-6
+    drawn = splat.rasterize(torch.cat([means, face_means]), torch.cat([opacities, face_opacities]),
+                            torch.cat([colours, face_colours]), camera,
+                            covariances=torch.cat([covariances, face_covariances]))
+    rows, cols = np.mgrid[0:size, 0:size] + 0.5 - size / 2
+    pixels = np.stack([cols, rows], -1)
+    ellipse = np.einsum("...i,ij,...j->...", pixels, np.linalg.inv(shape[0][:2, :2] * focal ** 2), pixels) <= (
+        2 * np.log(2 * opacity[0]))
+    solid = drawn.alpha.numpy() >= 0.5
+    assert (solid & ~ellipse).sum() > 0.02 * ellipse.sum()
+    off = np.abs(drawn.features.numpy() * 255 - 0.99 * colour * 255).max(-1) > 2
+    assert off[ellipse].mean() >= 0.2
+    assert len(facets(means, covariances, opacities, colours, t([0.0]), camera)[0]) == 0
