@@ -255,10 +255,12 @@ def exemplar_fill(photo: np.ndarray, hole: np.ndarray, start: np.ndarray) -> np.
     rows, cols = np.nonzero(sources | hole)
     box = np.s_[rows.min():rows.max() + 1, cols.min():cols.max() + 1]
     # the solver compares a patch that crosses the photograph's border with black there, and so fills a
-    # hole at the border with dark copies: past the border lies unknown ground, mirrored to start with
+    # hole near the border with dark copies: past the border lies unknown ground, mirrored to start with,
+    # as far as the patches around the hole reach at the coarsest level
     margin = (PATCH_PX // 2 + 1) << levels
-    top, left, bottom, right = (margin if gap == 0 else 0 for gap in (
-        rows.min(), cols.min(), hole.shape[0] - 1 - rows.max(), hole.shape[1] - 1 - cols.max()))
+    hole_rows, hole_cols = np.nonzero(hole)
+    top, left, bottom, right = (margin if gap < margin else 0 for gap in (
+        hole_rows.min(), hole_cols.min(), hole.shape[0] - 1 - hole_rows.max(), hole.shape[1] - 1 - hole_cols.max()))
     pad = lambda image, **kw: cv2.copyMakeBorder(image, top, bottom, left, right, **kw)  # noqa: E731
     unknown = pad(hole[box].astype(np.uint8), borderType=cv2.BORDER_CONSTANT, value=1) > 0
     copied = copied_patches(pad(photo[box], borderType=cv2.BORDER_REFLECT), unknown,
