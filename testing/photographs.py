@@ -2,8 +2,8 @@
 
 The shapes are a capsule (a cylinder with hemispherical caps) tilted in the
 image plane, textured with coloured stripes along its axis, and the standing
-solids (an upright cylinder, a box, a turned box); sphere_hits intersects rays
-with a sphere analytically. Ray casting is sphere tracing of a shape's signed
+solids (an upright cylinder, banded or in two plain colours, a box, a turned
+box); sphere_hits intersects rays with a sphere analytically. Ray casting is sphere tracing of a shape's signed
 distance, in float64 numpy.
 """
 from __future__ import annotations
@@ -160,6 +160,25 @@ class UprightCylinder:
 
 
 @dataclass(frozen=True)
+class PaintedCylinder(UprightCylinder):
+    """An upright cylinder in two plain colours, as a cup seen from above: ``side`` (3,) sRGB in [0,1] on its
+    side and base, ``top`` on its top face."""
+
+    side: tuple = (0.75, 0.1, 0.08)
+    top: tuple = (0.95, 0.95, 0.9)
+
+    def on_top(self, points: np.ndarray) -> np.ndarray:
+        """(...,) bool: the points nearer the top face than the side or the base."""
+        local = (points - self.centre) @ self.axes.T
+        to_top = np.abs(local[..., 1] - self.height / 2)
+        return to_top < np.minimum(np.abs(np.hypot(local[..., 0], local[..., 2]) - self.radius),
+                                   np.abs(local[..., 1] + self.height / 2))
+
+    def color(self, points: np.ndarray) -> np.ndarray:
+        return np.where(self.on_top(points)[..., None], self.top, self.side)
+
+
+@dataclass(frozen=True)
 class TurnedBox(Box):
     """A box standing on the ground, turned about the vertical: ``centre`` (3,) m, ``half`` (3,) m its half
     sides along its own axes, ``axes`` (3,3) rows its own x, up, z (standing_axes)."""
@@ -183,7 +202,7 @@ class Photograph:
     distance: np.ndarray
 
 
-Shape = Capsule | Box | UprightCylinder | TurnedBox
+Shape = Capsule | Box | UprightCylinder | PaintedCylinder | TurnedBox
 
 
 def photograph(shape: Shape, K: np.ndarray, world_to_camera: np.ndarray, width: int, height: int,

@@ -162,7 +162,8 @@ def initial_gaussians(scene: Scene, photo: np.ndarray, labels: np.ndarray, depth
         placed = place_ply(scene.reconstruct.init_ply, labels == 1, K, scene.objects[0].size_m)
         return placed, np.ones(len(placed), bool)
     small = [ObjectDepth(downsample(d.front, size, labels=True), downsample(d.back, size, labels=True),
-                         None if d.base is None else downsample(d.base.astype(np.uint8), size, labels=True) > 0)
+                         None if d.base is None else downsample(d.base.astype(np.uint8), size, labels=True) > 0,
+                         d.body)
              for d in depths]
     for stride in range(1, 9):  # the finest sampling within the budget
         lifted = [lift_object(d, K_work, photo_work, k, front_stride=stride, back_stride=2 * stride)
