@@ -27,16 +27,17 @@ import torch
 
 import splat
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact
+from schemas.camera import project_points
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
 from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
                        facets, grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
                        pores, rest_ray_colours, surface_under, undilated)
-from .silhouette import narrowed_to_mask
+from .silhouette import STILL_PX, narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, full_camera, inverse_deformation, map_moments, rest_visibility,
-                         source_points, source_roughness, source_spread, surface_normals, visibility)
+                         source_points, source_roughness, source_spread, surface_normals, to_camera, visibility)
 
 log = logging.getLogger("physmotion.render")
 
@@ -90,19 +91,33 @@ class Particles(NamedTuple):
     grains: torch.Tensor
     granular: torch.Tensor
     porous: torch.Tensor
+    narrowing: torch.Tensor
+    fading: torch.Tensor
+    rest_pixels: torch.Tensor
+    camera: splat.Camera
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
         """(P, 3) drawn positions (m), (P, 3, 3) covariances, (P,) opacities, (P, 3) colours and (P,)
         surface weights of a frame whose particles are at ``positions`` (P, 3) with deformation
-        gradients ``F`` (P, 3, 3); call
-        once per frame, in order (Mixing keeps its past). The surface weight is 1 for a Gaussian that
+        gradients ``F`` (P, 3, 3); call once per frame, in order (Mixing keeps its past). A Gaussian that
+        reaches past its object's mask is narrowed to it (narrowing, fading) by 1 - exp(-(m / STILL_PX)^2),
+        m how far (px) its picture has moved from where it stood at rest: at rest pm-enhance shows the
+        photograph beside the object, and a Gaussian standing as in the photograph draws its silhouette's
+        pixels as it was fitted to them. The surface weight is 1 for a Gaussian that
         is still a patch of the photographed surface, falling to 0 as it turns into a grain of
         flowing material (whose colour then stands for the material, not for its place in the
         photograph), and 0 for the interior."""
         mixed = self.mixing(positions, F)
-        shape = (1 - mixed[:, None, None]) * self.rest_covariances + mixed[:, None, None] * self.grain_covariances
+        # narrowed to the mask as far as it has moved from where it stood in the photograph
+        K = torch.as_tensor(self.camera.K, dtype=positions.dtype, device=positions.device)
+        moved_px = (project_points(to_camera(positions, self.camera.world_to_camera), K) - self.rest_pixels).norm(dim=1)
+        moved = (1 - torch.exp(-(moved_px / STILL_PX) ** 2)).to(self.narrowing.dtype)
+        size = 1 - moved * (1 - self.narrowing)
+        rest = size[:, None, None] ** 2 * self.rest_covariances
+        shape = (1 - mixed[:, None, None]) * rest + mixed[:, None, None] * self.grain_covariances
         colors = ((1 - mixed[:, None]) * self.colors + mixed[:, None] * self.grain_colors).clamp(0, 1)
-        opacities = (1 - mixed) * self.opacities * self.opaque_at_rest + mixed * self.grain_opacities
+        fading = 1 - moved * (1 - self.fading)
+        opacities = (1 - mixed) * self.opacities * fading * self.opaque_at_rest + mixed * self.grain_opacities
         drawn = positions + mixed[:, None] * self.grain_offsets.to(positions.dtype)
         return drawn, F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
 
@@ -115,8 +130,8 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     means, opacities, colors = t(gaussians.means), t(gaussians.opacities), t(gaussians.colors)
     covariances = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
     # the photograph's objects end at their mask: what a Gaussian draws past it is the background's
-    size, fade = narrowed_to_mask(means, covariances, gaussians.object_id, gaussians.mask, full_camera(gaussians))
-    covariances, opacities = covariances * size[:, None, None] ** 2, opacities * fade
+    narrowing, fading = narrowed_to_mask(means, covariances, gaussians.object_id, gaussians.mask,
+                                         full_camera(gaussians))
     rest_seen = rest_visibility(means, covariances, opacities, gaussians)
     normals = surface_normals(means)
     fill = ~trajectories.is_gaussian
@@ -171,7 +186,12 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
                            0.0),
         grains=has_lattice.to(opacities.dtype),
         granular=(has_lattice & t(granular)).to(opacities.dtype),
-        porous=(has_lattice & t(porous)).to(opacities.dtype))
+        porous=(has_lattice & t(porous)).to(opacities.dtype),
+        narrowing=torch.cat([narrowing, torch.ones(N, dtype=narrowing.dtype, device=device)]),
+        fading=torch.cat([fading, torch.ones(N, dtype=fading.dtype, device=device)]),
+        rest_pixels=project_points(to_camera(rest_means, camera.world_to_camera),
+                                   torch.as_tensor(camera.K, dtype=rest_means.dtype, device=device)),
+        camera=camera)
 
 
 def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, width: int,

@@ -4,10 +4,11 @@ A reconstruction fits the photograph's silhouette pixels, which mix the object w
 Gaussians whose footprints reach a few pixels past the objects' mask: on the clay example the surface's
 render has alpha above 1/2 up to 4 px beyond it, the tails of the Gaussians along the silhouette stacked.
 At rest pm-enhance shows the photograph there, but once the object moves that fringe moves with it: a soft
-band in the colour the source map reads beyond the mask. :func:`narrowed_to_mask` shrinks each Gaussian
-that reaches past its object's mask, at rest in the photograph's view, until it reaches no further than
-SILHOUETTE_TOLERANCE_PX past it (its alpha there a tenth of its opacity at most; splat's own dilation of
-0.3 px^2 comes on top).
+band in the colour the source map reads beyond the mask. :func:`narrowed_to_mask` finds how far to shrink
+each Gaussian that reaches past its object's mask, at rest in the photograph's view, so that it reaches no
+further than SILHOUETTE_TOLERANCE_PX past it (its alpha there a tenth of its opacity at most; splat's own
+dilation of 0.3 px^2 comes on top). The render narrows a Gaussian so as it moves (render.Particles.at): at
+rest it draws the silhouette's pixels it was fitted to, and the coarse frame 0 stays the reconstruction's.
 """
 from __future__ import annotations
 
@@ -32,6 +33,9 @@ MAX_WINDOW_PX = 16
 """Half the side of the largest window of pixels read around a Gaussian's centre (px)."""
 DILATION_PX2 = 0.3
 """splat's EWA dilation of every projected covariance (px^2)."""
+STILL_PX = 0.5
+"""How far (output px) a Gaussian's picture moves from where it stood at rest over which it is narrowed:
+1 - exp(-(m / STILL_PX)^2), as pm-enhance judges a pixel to stand still (compositing.standing_still)."""
 BISECTIONS = 12
 """Halvings of the interval of a Gaussian's size factor (to 1/4096)."""
 

@@ -72,11 +72,14 @@ def test_a_moved_object_carries_no_fringe():
     right: more than SILHOUETTE_TOLERANCE_PX + 1 px beyond the moved mask the render's alpha is under 1/2, and
     from half a pixel further under a tenth (the Gaussians' tenths at the tolerance, stacked and antialiased),
     where the fringe drew it at 0.77 and 0.62; the moved mask itself stays covered (alpha above 0.99 on all but
-    its outline's pixels)."""
+    its outline's pixels). At rest (frame 0) the Gaussians are drawn as fitted, the fringe included: pm-enhance
+    shows the photograph there."""
     gaussians, mask = fringed_gaussians()
     shift = 5
     coarse = render_video(gaussians, shifted_right(gaussians, shift), width=W, device="cpu")
     assert coarse.alpha.shape[1:] == (H, W)
+    at_rest = cv2.distanceTransform((~mask).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    assert coarse.alpha[0][at_rest > SILHOUETTE_TOLERANCE_PX + 1.5].max() > 0.5
     moved = np.zeros_like(mask)
     moved[:, shift:] = mask[:, :-shift]
     distance = cv2.distanceTransform((~moved).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
