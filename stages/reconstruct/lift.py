@@ -228,7 +228,7 @@ def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, n
     (AGREE_COS), among those the photograph recorded well (facing the camera, the origin, by RECORDED_FACING:
     along the silhouette a pixel mixes a strip of surface, darkened by shading, with the background). Where
     the mirror image is no such surface (near the silhouette, behind a handle, off a body that is not
-    symmetric), the colour spreads over the unseen surface from the nearest one coloured within ``reach`` of
+    symmetric), the colour spreads over the unseen surface from the nearest one so coloured within ``reach`` of
     it whose normal agrees with its own (SPREAD_COS), ring by ring. A face that continues no seen one keeps
     the colour it was lifted with: ``kept`` (G,) bool (the flat cut the body stands on), one whose mirror
     image lies beyond the picture (K (3,3), size (w, h) px: an object cut by its border, whose front meets no
@@ -255,7 +255,7 @@ def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, n
     beyond = ~((uv >= 0) & (uv <= size)).all(axis=1) | (mirrored[:, 2] <= 0)
     matched = agree.any(axis=1) & ~beyond
     out[unseen[matched]] = colors[near[matched, first[matched]]]
-    coloured = recorded.copy()  # the colours that spread
+    coloured = np.zeros_like(seen)  # the colours that spread: the mirrored ones
     coloured[unseen[matched]] = True
     settled = np.ones_like(seen)
     settled[unseen[~matched & ~beyond]] = False
