@@ -4,21 +4,22 @@ pm-simulate fills each object's volume with a lattice of particles behind its
 surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
 a Gaussian of its own (as PhysGaussian renders its filled particles):
 
-- colour: its object's material (:func:`crumb_colours`), for sand and snow the photograph's
-  on its rest ray; its rest normal is that of the surface it lies under, the nearest opaque
+- colour: the photograph's on its rest ray (:func:`rest_ray_colours`), a brittle solid's crumb
+  (:func:`crumb_colours`); its rest normal is that of the surface it lies under, the nearest opaque
   Gaussian of its object at rest (:func:`surface_under`);
 - opacity: :data:`INTERIOR_OPACITY`, solid material;
 - covariance: round, of standard deviation :data:`GRAIN_SIGMA` lattice spacings
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
 Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
-surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`), of
-varied sizes, elongated and turned at random, each moved off its lattice site by a random fraction of the
-cell (:func:`grain_offsets`: a heap shows no lattice). Sand and snow take the photograph's colour where
-their rest position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the
-part it belongs to, so its heap shows both); a solid's interior, the crumbs of its torn face, the colour of
-its lit half (:func:`crumb_colours`); its surface Gaussians keep theirs. Each grain is a little brighter or
-darker at the same hue (:func:`grain_colours`), each lit
+surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`): a
+solid's round and on its lattice; sand's and snow's of varied sizes, elongated and turned at random, each
+moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`: a heap shows no
+lattice). A grain takes the photograph's colour where its rest
+position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it
+belongs to, so a heap shows both); a brittle solid's interior, the crumbs of its torn face, the colour of its
+object's lit half (:func:`crumb_colours`), with pores (:func:`pores`). A grain of sand is a little brighter or
+darker at the same hue (:func:`grain_colours`), with two faces (:func:`facets`), lit
 from above: a brighter cap over a darker body, by its colour's albedo (:func:`grain_relief`,
 :func:`lit_caps`), over the shadowed crevice under it (:func:`crevices`: the gaps between a heap's grains
 are dark, as sand's are, where flat grains edge to edge read as a heap of discs).

@@ -57,13 +57,13 @@ class Particles(NamedTuple):
     rest_means (P, 3), m; rest_covariances (P, 3, 3), m^2; grain_offsets (P, 3), m, where a grain is
     drawn from its particle (interior.grain_offsets); grain_covariances (P, 3, 3), m^2,
     grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
-    its material flows (interior.Mixing): a hard grain of the lattice's size, for sand and snow in the
-    photograph's colour on its rest ray, else in its own colour, shaded (interior.grain_shapes,
+    its material flows (interior.Mixing): a hard grain of the lattice's size, in the photograph's colour on
+    its rest ray, a brittle solid's interior in its crumb's, shaded (interior.grain_shapes,
     grain_colours; its rest covariance, opacity and colour where its object has no lattice);
     opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
     (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
-    at rest (a fill particle: its object's material, interior.crumb_colours, or for sand and snow the
-    photograph's on its rest ray); rest_seen (P,) visibility in the photograph
+    at rest (a fill particle: the photograph's on its rest ray, or a brittle solid's crumb,
+    interior.crumb_colours); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
     relief (P,) how much a grain of sand or snow is lit from above once its material flows
@@ -148,8 +148,9 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
-    material = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
-    fill_colors = torch.where(t(granular[G:])[:, None], on_rest_ray[G:], material)
+    # broken brittle material shows its crumb; any other interior the colour of the surface in front of it
+    crumb = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
+    fill_colors = torch.where(t(porous[G:])[:, None], crumb, on_rest_ray[G:])
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
@@ -160,8 +161,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     rest_colors = torch.cat([colors, fill_colors])
     # a grain shows the material at its place: a surface Gaussian's own colour may hold the background it was
     # fitted beside (the silhouette's), the photograph 2 px inside its object's does not
-    surface_grain = t(granular | trajectories.is_gaussian)
-    grain_from = torch.where(surface_grain[:, None], on_rest_ray, rest_colors)
+    grain_from = torch.where(t(trajectories.is_gaussian)[:, None], on_rest_ray, rest_colors)
     # a heap's grains catch the light each its own way; a torn solid's are one matrix, its pores its texture
     shaded_grains = torch.where((has_lattice & t(granular))[:, None],
                                 t(grain_colours(grain_from.cpu().numpy())).to(colors.dtype), grain_from)
