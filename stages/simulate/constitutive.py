@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import warp as wp
 
 from schemas.materials import PRESETS
@@ -29,6 +30,10 @@ assert PRESETS == ("jelly", "metal", "sand", "plasticine", "foam", "snow", "rigi
 # CFL time step, stays bounded.
 SNOW_HARDENING_MIN = 0.1
 SNOW_HARDENING_MAX = 5.0
+# The substep follows the hardening the snow has (MPMSolver.stiffening): it is sized for this many times
+# the largest factor of its particles, and the stress of the substep stiffens no further
+# (docs/decisions/0039-granular-substeps.md).
+SNOW_HARDENING_GROWTH = 1.25
 # A yield stress (Pa) or critical stretch no state reaches: a material that does not yield.
 NO_YIELD = 1.0e30
 # The solids whose yielding the settle holds off (sand and snow settle as granular heaps).
@@ -36,6 +41,11 @@ YIELDING_SOLIDS = ("metal", "plasticine", "foam", "fracture")
 # Singular values below this are treated as this (inverted or crushed
 # particles), so that log-strain models stay finite.
 MIN_STRETCH = 1.0e-2
+# Where Y = (F F^T - I)(F F^T + I)^-1 is at most this (Frobenius) norm and det F > 0, the return mapping
+# takes the Hencky strain as a matrix series and no SVD (`near_rotation_strain`): every principal
+# stretch within 0.73 .. 1.36. Float32's SVD costs about 0.6 us a particle on the CPU and is good to
+# 1e-4; the series costs a quarter of that and is good to 1e-7 (docs/decisions/0039-granular-substeps.md).
+SERIES_REACH = 0.3
 
 
 @wp.struct
@@ -86,14 +96,23 @@ def material_params(material, yielding: bool = True) -> MaterialParams:
     return p
 
 
-def wave_speed(material) -> float:
+def wave_speed(material, stiffening: float = SNOW_HARDENING_MAX) -> float:
     """Largest elastic (P-)wave speed sqrt((lambda + 2 mu) / rho) in m/s, for the CFL bound; 0 for rigid
-    bodies, whose particles follow one rigid motion and carry no wave."""
+    bodies, whose particles follow one rigid motion and carry no wave. Snow's moduli are taken times
+    `stiffening`, the largest hardening factor its stress may reach (by default the clamp's
+    SNOW_HARDENING_MAX)."""
     if material.preset == "rigid":
         return 0.0
     mu, lam = lame_parameters(material.youngs_modulus, material.poisson_ratio)
-    stiffening = SNOW_HARDENING_MAX if material.preset == "snow" else 1.0
-    return math.sqrt(stiffening * (lam + 2.0 * mu) / material.density)
+    factor = stiffening if material.preset == "snow" else 1.0
+    return math.sqrt(factor * (lam + 2.0 * mu) / material.density)
+
+
+def snow_hardening(material, plastic_volume: np.ndarray) -> np.ndarray:
+    """Snow's hardening factor exp(xi (1 - J_p)), clamped as the stress clamps it, of plastic volume ratios
+    J_p (any shape)."""
+    return np.clip(np.exp(material.hardening * (1.0 - np.asarray(plastic_volume, np.float64))),
+                   SNOW_HARDENING_MIN, SNOW_HARDENING_MAX)
 
 
 def initial_history(material) -> float:
@@ -166,51 +185,115 @@ def exp_stretch(eps: wp.vec3):
     return wp.vec3(wp.exp(eps[0]), wp.exp(eps[1]), wp.exp(eps[2]))
 
 
+@wp.func
+def near_rotation_strain(F: wp.mat33):
+    """(Left Hencky strain log V of F = V R, whether F is near enough a rotation for it): the series
+    atanh Y = Y + Y^3/3 + Y^5/5 + ... of Y = (b - I)(b + I)^-1, b = F F^T (log b = 2 atanh Y), to under
+    1e-8, where det F > 0 and |Y| <= SERIES_REACH; (0, False) elsewhere."""
+    I = wp.identity(n=3, dtype=float)
+    b = F * wp.transpose(F)
+    Y = (b - I) * wp.inverse(b + I)
+    Y = 0.5 * (Y + wp.transpose(Y))  # a function of b, symmetric but for float32's rounding
+    if wp.determinant(F) <= 0.0 or wp.ddot(Y, Y) > SERIES_REACH * SERIES_REACH:
+        return wp.mat33(0.0), False
+    Y2 = Y * Y
+    term = Y
+    eps = Y
+    for k in range(1, 6):
+        term = term * Y2
+        eps = eps + term * (1.0 / float(2 * k + 1))
+        if wp.ddot(term, term) < 1.0e-16:
+            break
+    return eps, True
+
+
+@wp.func
+def symmetric_exp(Z: wp.mat33):
+    """exp(Z) of a symmetric Z of norm about 1 or less (a Hencky strain or a plastic step): its Taylor series
+    to under 1e-8."""
+    E = wp.identity(n=3, dtype=float)
+    term = E
+    for k in range(1, 16):
+        term = term * Z * (1.0 / float(k))
+        E = E + term
+        if wp.ddot(term, term) < 1.0e-16:
+            break
+    return E
+
+
+@wp.func
+def eigenvalue_range(A: wp.mat33):
+    """(smallest, largest) eigenvalue of a symmetric A, in closed form (Smith 1961)."""
+    q = wp.trace(A) / 3.0
+    B = A - q * wp.identity(n=3, dtype=float)
+    p2 = wp.ddot(B, B) / 6.0
+    if p2 < 1.0e-30:
+        return q, q
+    p = wp.sqrt(p2)
+    phi = wp.acos(wp.clamp(wp.determinant(B) / (2.0 * p2 * p), -1.0, 1.0)) / 3.0
+    return q + 2.0 * p * wp.cos(phi + 2.0 * wp.pi / 3.0), q + 2.0 * p * wp.cos(phi)
+
+
 # ------------------------------------------------------------ plasticity
 
 
 @wp.func
-def von_mises_return(eps: wp.vec3, mu: float, yield_stress: float, relaxation: float):
-    """Radial return of the deviatoric Hencky strain onto the von Mises cylinder.
+def plastic_flow(mat: MaterialParams, strain: float, dt: float, tr: float, dev_norm: float):
+    """The return mapping of a Hencky strain of trace `tr` and deviatoric norm `dev_norm` (eps =
+    dev + tr / 3 I): (the share of its deviatoric part removed, the share of its volumetric part removed,
+    the equivalent plastic strain gained).
 
-    ``relaxation`` in (0, 1] is the fraction of the overstress removed this
-    step: 1 is rate-independent plasticity, less is Perzyna viscoplasticity.
-    Returns (new strain, equivalent plastic strain increment).
+    Sand: Klar et al. 2016 onto the Drucker-Prager cone (cohesionless; stretched sand goes back to the
+    cone's tip). Metal, plasticine, foam: radial return onto the von Mises cylinder, |dev tau| = 2 mu
+    |dev eps| <= sqrt(2/3) sigma_y, sigma_y hardening with the plastic `strain` (metal) or softening
+    (plasticine); foam removes only the share 1 / (1 + viscosity / (2 mu dt)) of the overstress in a
+    substep of dt s (Perzyna viscoplasticity).
     """
-    mean = (eps[0] + eps[1] + eps[2]) / 3.0
-    dev = eps - wp.vec3(mean)
-    dev_norm = wp.length(dev)
-    # |dev tau| = 2 mu |dev eps| may not exceed sqrt(2/3) sigma_y
-    excess = dev_norm - wp.sqrt(2.0 / 3.0) * yield_stress / (2.0 * mu)
+    if mat.kind == SAND:
+        if tr >= 0.0:
+            return 1.0, 1.0, 0.0
+        gamma = dev_norm + (3.0 * mat.lam + 2.0 * mat.mu) / (2.0 * mat.mu) * tr * mat.friction_alpha
+        if gamma <= 0.0 or dev_norm == 0.0:
+            return 0.0, 0.0, 0.0
+        return gamma / dev_norm, 0.0, 0.0
+    yield_stress = mat.yield_stress
+    relaxation = 1.0
+    if mat.kind == METAL:
+        yield_stress = mat.yield_stress + mat.hardening * mat.youngs_modulus * strain
+    elif mat.kind == PLASTICINE:
+        yield_stress = mat.yield_stress * wp.exp(-mat.softening * strain)
+    elif mat.kind == FOAM:
+        relaxation = 1.0 / (1.0 + mat.viscosity / (2.0 * mat.mu * dt))
+    excess = dev_norm - wp.sqrt(2.0 / 3.0) * yield_stress / (2.0 * mat.mu)
     if excess <= 0.0:
-        return eps, 0.0
+        return 0.0, 0.0, 0.0
     gamma = relaxation * excess
-    return eps - (gamma / dev_norm) * dev, wp.sqrt(2.0 / 3.0) * gamma
+    return gamma / dev_norm, 0.0, wp.sqrt(2.0 / 3.0) * gamma
 
 
 @wp.func
-def drucker_prager_return(eps: wp.vec3, mu: float, lam: float, alpha: float):
-    """Klar et al. 2016 return mapping of the Hencky strain onto the Drucker-Prager cone (cohesionless sand)."""
-    tr = eps[0] + eps[1] + eps[2]
-    if tr >= 0.0:
-        return wp.vec3(0.0)  # stretched sand has no strength: back to the cone tip
-    dev = eps - wp.vec3(tr / 3.0)
-    dev_norm = wp.length(dev)
-    gamma = dev_norm + (3.0 * lam + 2.0 * mu) / (2.0 * mu) * tr * alpha
-    if gamma <= 0.0 or dev_norm == 0.0:
-        return eps
-    return eps - (gamma / dev_norm) * dev
+def snow_factor(mat: MaterialParams, Jp: float, stiffening: float):
+    """Snow's hardening factor exp(xi (1 - J_p)), clamped to [SNOW_HARDENING_MIN, stiffening]."""
+    return wp.clamp(wp.exp(mat.hardening * (1.0 - Jp)), SNOW_HARDENING_MIN, stiffening)
 
 
 @wp.kernel
-def update_stress(start: int, dt: float, materials: wp.array(dtype=MaterialParams), particles: Particles):
+def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(dtype=MaterialParams),
+                  particles: Particles):
     """Return-map F (trial -> elastic part) and write V_p * Kirchhoff stress (N m); dt in s, materials
-    indexed by the particles' object_id."""
+    indexed by the particles' object_id; snow's hardening factor at most `stiffening`, what the substep
+    was sized for.
+
+    Where F is near a rotation (near_rotation_strain) the Hencky strain and the plastic step are matrix
+    series and no SVD is taken: snow only where none of its principal stretches is clamped. Elsewhere
+    (a crushed, inverted or much stretched particle, snow at its limits) the SVD's principal stretches.
+    """
     p = wp.tid() + start
     mat = materials[particles.object_id[p]]
     Fp = particles.F[p]
     history = particles.history
     tau = wp.mat33(0.0)
+    I = wp.identity(n=3, dtype=float)
 
     if mat.kind == JELLY:
         if mat.neo_hookean == 1:
@@ -218,49 +301,71 @@ def update_stress(start: int, dt: float, materials: wp.array(dtype=MaterialParam
         else:
             tau = fixed_corotated_kirchhoff(Fp, polar_rotation(Fp), mat.mu, mat.lam)
     elif mat.kind != RIGID:  # rigid: no stress, its particles follow one rigid motion (rigid.py)
-        U = wp.mat33()
-        sig = wp.vec3()
-        V = wp.mat33()
-        wp.svd3(Fp, U, sig, V)
-        if mat.kind == METAL or mat.kind == PLASTICINE or mat.kind == FOAM:
-            strain = history[p]
-            yield_stress = mat.yield_stress
-            relaxation = 1.0
-            if mat.kind == METAL:
-                yield_stress = mat.yield_stress + mat.hardening * mat.youngs_modulus * strain
-            elif mat.kind == PLASTICINE:
-                yield_stress = mat.yield_stress * wp.exp(-mat.softening * strain)
-            else:
-                # Perzyna: the overstress relaxes with time constant viscosity / (2 mu)
-                relaxation = 1.0 / (1.0 + mat.viscosity / (2.0 * mat.mu * dt))
-            eps, d_strain = von_mises_return(log_stretch(sig), mat.mu, yield_stress, relaxation)
-            history[p] = strain + d_strain
-            Fp = U * wp.diag(exp_stretch(eps)) * wp.transpose(V)
-            tau = hencky_kirchhoff(U, eps, mat.mu, mat.lam)
-        elif mat.kind == SAND:
-            eps = drucker_prager_return(log_stretch(sig), mat.mu, mat.lam, mat.friction_alpha)
-            Fp = U * wp.diag(exp_stretch(eps)) * wp.transpose(V)
-            tau = hencky_kirchhoff(U, eps, mat.mu, mat.lam)
-        elif mat.kind == SNOW:
-            # clamp the principal stretches; what is clamped away becomes plastic volume change
-            lo = 1.0 - mat.critical_compression
-            hi = 1.0 + mat.critical_stretch
-            clamped = wp.vec3(wp.clamp(sig[0], lo, hi), wp.clamp(sig[1], lo, hi), wp.clamp(sig[2], lo, hi))
-            Jp = history[p] * (sig[0] * sig[1] * sig[2]) / (clamped[0] * clamped[1] * clamped[2])
-            history[p] = Jp
-            Fp = U * wp.diag(clamped) * wp.transpose(V)
-            h = wp.clamp(wp.exp(mat.hardening * (1.0 - Jp)), SNOW_HARDENING_MIN, SNOW_HARDENING_MAX)
-            tau = fixed_corotated_kirchhoff(Fp, U * wp.transpose(V), h * mat.mu, h * mat.lam)
-        elif mat.kind == FRACTURE:
-            # damage grows irreversibly with the largest principal stretch
-            damage = wp.max(history[p], wp.clamp((sig[0] - 1.0 - mat.critical_stretch) / mat.toughness, 0.0, 1.0))
-            history[p] = damage
-            tau = fixed_corotated_kirchhoff(Fp, U * wp.transpose(V), mat.mu, mat.lam)
-            if sig[0] * sig[1] * sig[2] > 1.0:
-                # broken material carries no tension but still resists compression
-                tau = (1.0 - damage) * tau
-                if damage >= 1.0:
-                    Fp = U * wp.transpose(V)
+        strain, near = near_rotation_strain(Fp)
+        if near and mat.kind == SNOW:
+            lo, hi = eigenvalue_range(strain)
+            near = lo >= wp.log(1.0 - mat.critical_compression) and hi <= wp.log(1.0 + mat.critical_stretch)
+        if near:
+            if mat.kind == SNOW or mat.kind == FRACTURE:
+                R = symmetric_exp(-strain) * Fp
+                if mat.kind == SNOW:  # unclamped: no plastic volume change
+                    h = snow_factor(mat, history[p], stiffening)
+                    tau = fixed_corotated_kirchhoff(Fp, R, h * mat.mu, h * mat.lam)
+                else:
+                    lo, hi = eigenvalue_range(strain)
+                    damage = wp.max(history[p], wp.clamp((wp.exp(hi) - 1.0 - mat.critical_stretch) / mat.toughness,
+                                                         0.0, 1.0))
+                    history[p] = damage
+                    tau = fixed_corotated_kirchhoff(Fp, R, mat.mu, mat.lam)
+                    if wp.determinant(Fp) > 1.0:
+                        tau = (1.0 - damage) * tau
+                        if damage >= 1.0:
+                            Fp = R
+            else:  # sand, metal, plasticine, foam
+                tr = wp.trace(strain)
+                deviator = strain - (tr / 3.0) * I
+                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], dt, tr,
+                                                                 wp.sqrt(wp.ddot(deviator, deviator)))
+                history[p] = history[p] + d_strain
+                step = -dev_share * deviator - (volume_share * tr / 3.0) * I
+                if dev_share > 0.0 or volume_share > 0.0:
+                    Fp = symmetric_exp(step) * Fp
+                strain = strain + step
+                tau = 2.0 * mat.mu * strain + (mat.lam * wp.trace(strain)) * I
+        else:
+            U = wp.mat33()
+            sig = wp.vec3()
+            V = wp.mat33()
+            wp.svd3(Fp, U, sig, V)
+            if mat.kind == SNOW:
+                # clamp the principal stretches; what is clamped away becomes plastic volume change
+                lo = 1.0 - mat.critical_compression
+                hi = 1.0 + mat.critical_stretch
+                clamped = wp.vec3(wp.clamp(sig[0], lo, hi), wp.clamp(sig[1], lo, hi), wp.clamp(sig[2], lo, hi))
+                Jp = history[p] * (sig[0] * sig[1] * sig[2]) / (clamped[0] * clamped[1] * clamped[2])
+                history[p] = Jp
+                Fp = U * wp.diag(clamped) * wp.transpose(V)
+                h = snow_factor(mat, Jp, stiffening)
+                tau = fixed_corotated_kirchhoff(Fp, U * wp.transpose(V), h * mat.mu, h * mat.lam)
+            elif mat.kind == FRACTURE:
+                # damage grows irreversibly with the largest principal stretch
+                damage = wp.max(history[p], wp.clamp((sig[0] - 1.0 - mat.critical_stretch) / mat.toughness, 0.0, 1.0))
+                history[p] = damage
+                tau = fixed_corotated_kirchhoff(Fp, U * wp.transpose(V), mat.mu, mat.lam)
+                if sig[0] * sig[1] * sig[2] > 1.0:
+                    # broken material carries no tension but still resists compression
+                    tau = (1.0 - damage) * tau
+                    if damage >= 1.0:
+                        Fp = U * wp.transpose(V)
+            else:  # sand, metal, plasticine, foam
+                eps = log_stretch(sig)
+                tr = eps[0] + eps[1] + eps[2]
+                dev = eps - wp.vec3(tr / 3.0)
+                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], dt, tr, wp.length(dev))
+                history[p] = history[p] + d_strain
+                eps = eps - dev_share * dev - wp.vec3(volume_share * tr / 3.0)
+                Fp = U * wp.diag(exp_stretch(eps)) * wp.transpose(V)
+                tau = hencky_kirchhoff(U, eps, mat.mu, mat.lam)
 
     particles.F[p] = Fp
     particles.volume_stress[p] = particles.volume[p] * tau

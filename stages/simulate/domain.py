@@ -17,7 +17,7 @@ import numpy as np
 
 from schemas.solid import gravity_axes
 
-from .constitutive import wave_speed
+from .constitutive import SNOW_HARDENING_MAX, wave_speed
 from .mpm import BOUNDARY_NODES, Grid
 
 STANDARD_GRAVITY = 9.81  # m/s^2
@@ -116,9 +116,10 @@ def fit_grid(rest_sim: np.ndarray, dx: float, *, ground_y: float | None, walls: 
     return Grid(origin=tuple(float(o) for o in origin), dx=dx, shape=tuple(int(n) for n in shape))
 
 
-def cfl_substep(dx: float, materials: list, max_speed: float, longest: float = math.inf) -> float:
+def cfl_substep(dx: float, materials: list, max_speed: float, longest: float = math.inf,
+                stiffening: float = SNOW_HARDENING_MAX) -> float:
     """Largest stable substep in s: CFL * dx / (fastest elastic wave + fastest particle, m/s), and at most
     `longest` s, which is all that bounds it where nothing can move (rigid bodies, no gravity, no condition:
-    no wave and no speed)."""
-    speed = max(wave_speed(m) for m in materials) + max_speed
+    no wave and no speed). Snow's wave is that of its moduli times `stiffening` (constitutive.wave_speed)."""
+    speed = max(wave_speed(m, stiffening) for m in materials) + max_speed
     return min(longest, CFL * dx / speed) if speed > 0 else longest

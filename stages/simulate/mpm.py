@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 import warp as wp
 
-from .constitutive import initial_history, params_array, update_stress
+from .constitutive import (SNOW_HARDENING_GROWTH, SNOW_HARDENING_MAX, initial_history, params_array, snow_hardening,
+                           update_stress)
 from .crack_fields import CrackFields, breaks, crack_contact, crack_field
 from .state import Cracks, GridNodes, Particles, Step
 from .stencil import stencil_base, stencil_weights
@@ -422,13 +423,21 @@ class MPMSolver:
     The kernels take these arrays grouped in `particles` (state.Particles), the
     grid in `nodes` (state.GridNodes) and the substep's length and laws in `step` (state.Step).
 
+    `stiffening` is the largest hardening factor snow's stress may reach in the next substep; a caller
+    sizes the substep for it (constitutive.wave_speed). It is the clamp's SNOW_HARDENING_MAX unless
+    `follow_hardening`: then, after every substep, SNOW_HARDENING_GROWTH times the largest factor the
+    snow's particles have, so that snow at rest steps at its own stiffness, not at the fivefold one its
+    hardening may reach (docs/decisions/0039-granular-substeps.md).
+
     Args:
         walls: the domain's faces are slip walls; else only the ground (if any) closes it.
+        follow_hardening: snow's stress stiffens at most to `stiffening`, which follows its particles.
     """
 
     def __init__(self, grid: Grid, positions: np.ndarray, masses: np.ndarray, volumes: np.ndarray,
                  object_id: np.ndarray, materials: list, gravity: np.ndarray, ground: Ground,
-                 walls: bool = False, device: str = "cpu", n_parts: int | None = None):
+                 walls: bool = False, device: str = "cpu", n_parts: int | None = None,
+                 follow_hardening: bool = False):
         self.grid, self.ground, self.walls, self.device = grid, ground, bool(walls), device
         self.gravity = wp.vec3(*np.asarray(gravity, dtype=np.float32))
         n = len(positions)
@@ -456,6 +465,10 @@ class MPMSolver:
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
+        # per snow object (its material, its particles), where the substep follows its hardening
+        self._snow = [(m, np.flatnonzero(np.asarray(object_id) == k)) for k, m in enumerate(materials)
+                      if m.preset == "snow"] if follow_hardening else []
+        self.stiffening = SNOW_HARDENING_MAX
         self.rigid = None
         self._pinned = None  # pin(): where substeps leave the particles
         self.particles = Particles()
@@ -489,6 +502,7 @@ class MPMSolver:
         self._pool = ThreadPoolExecutor(self.n_parts) if self.n_parts > 1 else None
         self._corners = wp.zeros(6, dtype=wp.int32, device=device)  # stencil_node_box's output
         self._no_corners = np.array([nx, ny, nz, -1, -1, -1], np.int32)  # its start: an empty box
+        self._follow_hardening()
         wp.load_module("stages.simulate", device=device, recursive=True)  # compile before threads race to
 
     def _parallel(self, launches):
@@ -549,7 +563,7 @@ class MPMSolver:
             ])
         g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles])
         flight = (free_flight, lambda s, part: [s, step, nodes, particles])
-        stress = (update_stress, lambda s, part: [s, dt, self.materials, particles])
+        stress = (update_stress, lambda s, part: [s, dt, self.stiffening, self.materials, particles])
         if self.rigid is None:
             self._per_particle(flight, g2p, stress)
         else:  # the rigid projection gathers every rigid particle's G2P velocity first
@@ -558,6 +572,20 @@ class MPMSolver:
             self._per_particle(stress)
         if self._pinned is not None:
             wp.copy(self.x, self._pinned)
+        self._follow_hardening()
+
+    @property
+    def hardening_followed(self) -> bool:
+        """Whether `stiffening` follows snow's particles, and with it the substep their callers size."""
+        return bool(self._snow)
+
+    def _follow_hardening(self) -> None:
+        """Set `stiffening` to SNOW_HARDENING_GROWTH times the snow particles' largest hardening factor."""
+        if not self._snow:
+            return
+        history = self.history.numpy()
+        largest = max(float(snow_hardening(m, history[members].min())) for m, members in self._snow)
+        self.stiffening = min(SNOW_HARDENING_MAX, SNOW_HARDENING_GROWTH * largest)
 
     def hold_yield(self, held: bool) -> None:
         """With `held`, the solids that yield or break (constitutive.YIELDING_SOLIDS) respond elastically only."""
@@ -589,6 +617,7 @@ class MPMSolver:
         self.F.assign(np.where(keep[:, None, None], self.F.numpy(), eye))
         self.history.assign(np.where(keep, self.history.numpy(), self._history0))
         self.volume_stress.assign(np.where(keep[:, None, None], self.volume_stress.numpy(), 0.0).astype(np.float32))
+        self._follow_hardening()
 
     def _move_to(self, origin: np.ndarray) -> None:
         """Put the grid's node (0, 0, 0) at `origin` (3,) m; the ground stays on its node plane."""

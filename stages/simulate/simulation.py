@@ -125,8 +125,10 @@ class Simulation:
                        if ground.enabled else Ground(GROUND_NONE))
         # potential energy is measured from the ground, else from the grid's starting floor
         self._height_zero = self.ground_y if ground.enabled else self.grid.origin[1]
+        # the CFL substep follows snow's hardening, unless physics.dt fixes the substep
         self.solver = MPMSolver(self.grid, rest_sim, self.masses, self.volumes, self.object_id, self.materials,
-                                self.Q @ self.gravity_world, self.ground, walls=physics.walls, device=device)
+                                self.Q @ self.gravity_world, self.ground, walls=physics.walls, device=device,
+                                follow_hardening=physics.dt is None)
         rigid = {k: m for k, m in enumerate(self.materials) if m.preset == "rigid"}
         if rigid:  # points within half a lattice spacing of the ground touch it
             self.solver.attach_rigid(RigidBodies(rest_sim, self.masses, self.object_id, rigid, self.ground,
@@ -250,13 +252,15 @@ class Simulation:
         """The CFL substep in s for particles up to max_speed (m/s), what a condition acting between since and
         until (s; by default the whole run) may give them, and a frame of free fall and of those conditions'
         forces; at most a frame. A condition outside the window adds nothing: what it set moving before,
-        max_speed holds."""
+        max_speed holds. Snow's wave is that of the hardening its stress may reach in the next substep
+        (MPMSolver.stiffening)."""
         speed, acceleration = 0.0, 0.0
         for start, end, kick, push in self._pushes:
             if start <= until and (end is None or end >= since):
                 speed, acceleration = max(speed, kick), max(acceleration, push)
         fall = (float(np.linalg.norm(self.gravity_world)) + acceleration) / self.physics.fps
-        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + speed + fall, 1.0 / self.physics.fps)
+        return domain.cfl_substep(self.grid.dx, self.materials, max_speed + speed + fall, 1.0 / self.physics.fps,
+                                  self.solver.stiffening)
 
     def _condition_pushes(self) -> list[tuple[float, float | None, float, float]]:
         """(start s, end s (None: to the end; an impulse's is its start), speed m/s it gives, largest acceleration
@@ -345,12 +349,16 @@ class Simulation:
                  self.substeps_at_rest)
         started = reported = time.perf_counter()
         steps, footless = 0, False
+        relaxation_s = 0.0
         while steps < most:
             s.substep(dt)
             steps += 1
+            relaxation_s += dt
             if relaxation.step(s, dt):
                 break
-            if can_fall and relaxation.peaks == 0 and steps * dt > rest_state.FOOTLESS_PERIODS * period:
+            if s.hardening_followed:
+                dt = self._cfl_substep(0.0)
+            if can_fall and relaxation.peaks == 0 and relaxation_s > rest_state.FOOTLESS_PERIODS * period:
                 footless = True  # still falling, pinned: its contact cannot carry it as photographed
                 break
             if time.perf_counter() - reported > SETTLE_LOG_EVERY_S:
@@ -362,7 +370,7 @@ class Simulation:
                          per_step * min(most - steps, relaxation.substeps_left()), per_step * (most - steps))
         s.pin(False)
         s.hold_yield(False)
-        result.substeps, result.relaxation_s, result.wall_s = steps, steps * dt, time.perf_counter() - started
+        result.substeps, result.relaxation_s, result.wall_s = steps, relaxation_s, time.perf_counter() - started
         result.peaks, result.residual = relaxation.peaks, relaxation.residual
         if footless:
             s.reset(rest_sim, keep=np.zeros(len(rest_sim), bool))
@@ -425,12 +433,18 @@ class Simulation:
                                  f"{diag['max_speed'][f - 1]:.3g} m/s", "soften the conditions or the impact, "
                                  "or raise physics.max_substeps_per_frame if you mean it")
             every = self._follow_every(float(diag["max_speed"][f - 1]), h)
-            for i in range(n):
+            i = 0
+            while i < n:
                 if i % every == 0:
                     self.solver.follow(FOLLOW_MARGIN_CELLS)
                 self.conditions.before_substep(t, self.solver)
                 self.solver.substep(h)
                 t += h
+                i += 1
+                if self.solver.hardening_followed and i < n:  # the rest of the frame at the snow's stiffness now
+                    left = max(1, math.ceil((times[f] - t) / self.substep_size(
+                        float(diag["max_speed"][f - 1]), times[f - 1], times[f]) - 1e-9))
+                    n, h = i + left, (times[f] - t) / left
             t = times[f]
             diag["substeps"][f] = n
             self._record(f, positions, F, diag)
