@@ -1,8 +1,6 @@
 """Helpers for the backbone tests: tiny scene folders made on the fly, and one workflow run of the tiny scene."""
 import fcntl
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import cv2
@@ -10,11 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-REPO = Path(__file__).resolve().parents[2]
-BIN = Path(sys.executable).parent
-# As the README runs it (.venv/bin/snakemake, venv not activated): the stage programs are not on PATH.
-ENV = {**os.environ, "PATH": os.pathsep.join(p for p in os.environ["PATH"].split(os.pathsep)
-                                             if Path(p).resolve() != BIN.resolve())}
+from testing.workflow import run_snakemake
 
 
 def make_photo(folder: Path, width: int = 64, height: int = 48, name: str = "photo.png") -> Path:
@@ -61,15 +55,9 @@ def scene_dir(tmp_path: Path) -> Path:
     return folder
 
 
-def snakemake_command(workdir: Path, *args: str, config: tuple = ()) -> list:
-    """The workflow's command line over workdir/scenes into workdir/results on 2 cores."""
-    return [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "2", "--config",
-            f"scenes_dir={workdir / 'scenes'}", f"results_dir={workdir / 'results'}", "device=cpu", *config, *args]
-
-
 def snakemake(workdir: Path, *args: str) -> str:
     """The workflow over workdir/scenes into workdir/results on 2 cores; its output (it must succeed)."""
-    proc = subprocess.run(snakemake_command(workdir, *args), cwd=workdir, env=ENV, capture_output=True, text=True)
+    proc = run_snakemake(workdir / "scenes", workdir / "results", *args)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     return proc.stdout + proc.stderr
 

@@ -6,7 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from .conftest import BIN, ENV, REPO, write_scene
+from testing.workflow import ENV, run_snakemake
+
+from .conftest import write_scene
 from .mounts import resize, tmpfs
 
 ODD_SCENE = "my ball (v2) [ü].x"
@@ -19,9 +21,7 @@ def run_workflow(scenes: Path, results: Path, one_core: bool = False) -> subproc
     thread, so that anything that follows the thread count or the load would come out different."""
     env = {**ENV, **({"OMP_NUM_THREADS": "1"} if one_core else {})}
     pin = (lambda: os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})) if one_core else None
-    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"), "--cores", "1" if one_core
-           else "2", "--config", f"scenes_dir={scenes}", f"results_dir={results}", "device=cpu"]
-    return subprocess.run(cmd, cwd=scenes.parent, env=env, capture_output=True, text=True, preexec_fn=pin)
+    return run_snakemake(scenes, results, cores=1 if one_core else 2, env=env, preexec_fn=pin)
 
 
 @pytest.fixture(scope="module")

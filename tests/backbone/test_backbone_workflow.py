@@ -12,8 +12,9 @@ import yaml
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
 from schemas.video import read_video
+from testing.workflow import BIN, ENV, run_snakemake, snakemake_command
 
-from .conftest import BIN, ENV, snakemake, snakemake_command, tiny_scene_dict, write_scene
+from .conftest import snakemake, tiny_scene_dict, write_scene
 
 
 def planned_jobs(workdir: Path) -> dict:
@@ -166,15 +167,14 @@ def test_report_shows_each_scenes_video_sheet_setup_plots_and_times(finished_run
 
 def test_the_workflow_has_no_lint_findings(tmp_path):
     write_scene(tmp_path / "scenes" / "tiny")
-    proc = subprocess.run(snakemake_command(tmp_path, "--lint"), cwd=tmp_path, env=ENV, capture_output=True, text=True)
+    proc = run_snakemake(tmp_path / "scenes", tmp_path / "results", "--lint")
     assert proc.returncode == 0 and "Congratulations" in proc.stdout + proc.stderr, proc.stdout + proc.stderr
 
 
 def test_the_config_is_checked_by_its_schema(tmp_path):
     write_scene(tmp_path / "scenes" / "tiny")
     for wrong, named in (("gpu=-1", "gpu"), ("devices=cpu", "devices"), ("device=tpu", "tpu")):
-        proc = subprocess.run(snakemake_command(tmp_path, "-n", config=(wrong,)), cwd=tmp_path, env=ENV,
-                              capture_output=True, text=True)
+        proc = run_snakemake(tmp_path / "scenes", tmp_path / "results", "-n", config=(wrong,))
         out = proc.stdout + proc.stderr
         assert proc.returncode != 0 and named in out and "config.schema.yaml" in out, out
 
@@ -187,8 +187,7 @@ def test_a_bad_scene_fails_its_own_job_and_the_good_one_runs(tmp_path):
     bad = tiny_scene_dict()
     bad["physics"]["ground"] = {"friction": float("inf")}
     write_scene(tmp_path / "scenes" / "bad one", bad)
-    proc = subprocess.run(snakemake_command(tmp_path, "--until", "reconstruct", "refused"), cwd=tmp_path, env=ENV,
-                          capture_output=True, text=True)
+    proc = run_snakemake(tmp_path / "scenes", tmp_path / "results", "--until", "reconstruct", "refused")
     out = proc.stdout + proc.stderr
     assert proc.returncode != 0
     assert "field 'physics.ground.friction'" in out and "Fix:" in out
@@ -204,7 +203,7 @@ def test_after_ctrl_c_the_same_command_reruns_and_completes(tmp_path):
     scene = tiny_scene_dict()
     scene["physics"]["duration_s"] = 2.0
     write_scene(tmp_path / "scenes" / "tiny", scene)
-    command = snakemake_command(tmp_path, "--until", "simulate")
+    command = snakemake_command(tmp_path / "scenes", tmp_path / "results", "--until", "simulate")
     proc = subprocess.Popen(command, cwd=tmp_path, env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
     setup = tmp_path / "results" / "tiny" / "setup.png"

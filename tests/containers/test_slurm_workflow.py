@@ -1,25 +1,18 @@
 """The example workflow through a real one-node SLURM cluster (slurm-wlm on loopback, started and
 stopped here) with the SLURM profile: the same videos as a local run (the session's run of the tiny
 scene, tests/backbone/conftest.tiny_run, which the workflow tests read too)."""
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
 from schemas.video import read_video
+from testing.workflow import run_snakemake, with_programs
 
 from ..backbone.conftest import tiny_run, write_scene  # noqa: F401 (tiny_run: a fixture)
 from .slurm_cluster import slurm_cluster, why_unavailable
 
-REPO = Path(__file__).resolve().parents[2]
-BIN = Path(sys.executable).parent
 # This cluster has no accounting database (sacct cannot answer) and one user with no account.
-SLURM_ARGS = ["--profile", str(REPO / "workflow" / "profiles" / "slurm"), "--slurm-status-command", "squeue",
-              "--slurm-no-account", "--slurm-init-seconds-before-status-checks", "1",
-              "--slurm-keep-successful-logs", "--latency-wait", "5"]
+SLURM_ARGS = ["--slurm-status-command", "squeue", "--slurm-no-account", "--slurm-init-seconds-before-status-checks",
+              "1", "--slurm-keep-successful-logs", "--latency-wait", "5"]
 
 
 @pytest.fixture(scope="module")
@@ -31,18 +24,12 @@ def cluster(tmp_path_factory):
         yield env
 
 
-def run_workflow(workdir: Path, env: dict, *args: str) -> None:
-    write_scene(workdir / "scenes" / "tiny")
-    env = {**env, "PATH": f"{BIN}{os.pathsep}{env['PATH']}"}
-    cmd = [str(BIN / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"),
-           "--config", "scenes_dir=scenes", "results_dir=results", "device=cpu", *args]
-    proc = subprocess.run(cmd, cwd=workdir, env=env, capture_output=True, text=True, timeout=900)
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
-
-
 @pytest.mark.slow
 def test_slurm_run_makes_the_same_videos_as_a_local_run(cluster, tmp_path, request):
-    run_workflow(tmp_path / "slurm", cluster, *SLURM_ARGS)
+    write_scene(tmp_path / "slurm" / "scenes" / "tiny")
+    proc = run_snakemake(tmp_path / "slurm" / "scenes", tmp_path / "slurm" / "results", *SLURM_ARGS, cores=None,
+                         profile="slurm", env=with_programs(cluster), timeout=900)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     # asked for only now: under xdist the other worker is likely making it meanwhile, so this one need not wait
     local_run = request.getfixturevalue("tiny_run")
     # Every stage ran as its own SLURM job (the executor keeps one log folder per rule).
