@@ -70,8 +70,11 @@ class Particles(NamedTuple):
     (interior.grain_relief; 0 for the other materials); grains (P,) 1 for a particle of an object with a
     lattice, a hard grain once its material flows (interior.undilated), else 0; granular (P,) 1 for a grain
     of sand or snow (of an object with a lattice), which shows a shadowed crevice under it once its material
-    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a solid (of an object with a lattice), which
-    shows a pore in it once its material flows (interior.pores), else 0.
+    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a brittle solid (interior.POROUS, of an
+    object with a lattice), which shows a pore in it once its material flows (interior.pores), else 0;
+    narrowing (P,) and fading (P,) the factors on a Gaussian's size and opacity that keep it within a pixel of
+    its object's mask once it moves (silhouette.narrowed_to_mask; 1 for the interior); rest_pixels (P, 2)
+    where each particle stands in the frames at rest (output pixels); camera the frames'.
     """
 
     rest_means: torch.Tensor
