@@ -2,13 +2,14 @@
 that covers every third-party module its stage imports, and each rule runs in its stage's image."""
 import ast
 import re
-import subprocess
 import sys
 import tomllib
 from importlib.metadata import packages_distributions
 from pathlib import Path
 
 import pytest
+
+from testing.workflow import run_snakemake
 
 from ..backbone.conftest import write_scene
 
@@ -159,10 +160,7 @@ def test_each_rule_runs_in_the_image_of_its_program():
 def planned_resources(workdir: Path, *config: str) -> dict[str, dict[str, str]]:
     """Rule -> resources that a dry run of the tiny scene plans."""
     write_scene(workdir / "scenes" / "tiny")
-    proc = subprocess.run(
-        [str(Path(sys.executable).parent / "snakemake"), "--snakefile", str(REPO / "workflow" / "Snakefile"),
-         "-n", "--cores", "2", "--config", "scenes_dir=scenes", "results_dir=results", *config],
-        cwd=workdir, capture_output=True, text=True)
+    proc = run_snakemake(workdir / "scenes", workdir / "results", "-n", config=config)
     assert proc.returncode == 0, proc.stderr[-2000:]
     plan = {}
     for rule, resources in re.findall(r"^(?:local)?rule (\w+):\n(?:.*\n)*?\s+resources: (.*)$", proc.stdout, re.M):

@@ -4,7 +4,6 @@ stage as the workflow's rules run, gives the same artifacts and videos as the lo
 import json
 import os
 import subprocess
-import sys
 from importlib.metadata import version
 from pathlib import Path
 
@@ -13,11 +12,11 @@ import numpy as np
 import pytest
 
 from schemas.video import read_video
+from testing.workflow import with_programs
 
 from ..backbone.conftest import write_scene
 from .stage_images import build_images, docker, run_in_image, why_unavailable
 
-BIN = Path(sys.executable).parent
 TAG = version("physmotion")
 S, R = "scenes/tiny/scene.yaml", "results/tiny"
 # The workflow's commands for one scene, grouped by the image their rules name.
@@ -79,7 +78,7 @@ def test_images_make_the_same_artifacts_and_videos_as_the_local_environment(imag
     for workdir in (local, contained):
         write_scene(workdir / "scenes" / "tiny")
         (workdir / R).mkdir(parents=True)
-    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+    env = with_programs(os.environ)
     for stage, commands in CHAIN.items():
         for cmd in commands:
             proc = subprocess.run(with_device(cmd), cwd=local, env=env, capture_output=True, text=True)
