@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
+from schemas import InputError, load_scene
 from testing.workflow import run_snakemake
 
 
@@ -46,6 +47,13 @@ def write_scene(folder: Path, scene: dict | None = None, text: str | None = None
     path = folder / "scene.yaml"
     path.write_text(text if text is not None else yaml.safe_dump(scene or tiny_scene_dict(), sort_keys=False))
     return path
+
+
+def scene_refusal(folder: Path, scene: dict | None = None, text: str | None = None) -> InputError:
+    """The InputError that loading the scene written by write_scene(folder, scene, text) raises."""
+    with pytest.raises(InputError) as info:
+        load_scene(write_scene(folder, scene, text))
+    return info.value
 
 
 @pytest.fixture

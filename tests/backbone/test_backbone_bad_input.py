@@ -6,17 +6,7 @@ import pytest
 
 from schemas import InputError, load_scene
 
-from .conftest import tiny_scene_dict, write_scene
-
-
-def refusal(tmp_path, edit=None, text=None) -> InputError:
-    scene = tiny_scene_dict()
-    if edit:
-        edit(scene)
-    path = write_scene(tmp_path, scene, text)
-    with pytest.raises(InputError) as info:
-        load_scene(path)
-    return info.value
+from .conftest import scene_refusal, tiny_scene_dict, write_scene
 
 
 NON_FINITE = [
@@ -33,7 +23,9 @@ NON_FINITE = [
 @pytest.mark.parametrize("value", [math.nan, math.inf, -math.inf])
 @pytest.mark.parametrize("field, edit", NON_FINITE, ids=[f for f, _ in NON_FINITE])
 def test_non_finite_numbers_are_refused_under_their_own_key(tmp_path, field, edit, value):
-    err = refusal(tmp_path, lambda s: edit(s, value))
+    scene = tiny_scene_dict()
+    edit(scene, value)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == field
     assert "infinite or not a number" in err.problem and "less than" not in err.problem
 
@@ -41,13 +33,13 @@ def test_non_finite_numbers_are_refused_under_their_own_key(tmp_path, field, edi
 def test_yaml_spellings_of_nan_and_inf_are_refused(tmp_path):
     for spelling in (".nan", ".inf", "-.Inf", "1e999"):
         text = f"image: photo.png\nobjects:\n  - mask: mask.png\nphysics:\n  fps: {spelling}\n"
-        err = refusal(tmp_path, text=text)
+        err = scene_refusal(tmp_path, text=text)
         assert err.field == "physics.fps" and "infinite or not a number" in err.problem, spelling
 
 
 def test_duplicate_keys_are_refused_naming_both_lines(tmp_path):
     text = "image: photo.png\nobjects:\n  - mask: mask.png\n    size_m: 0.2\n    size_m: 5\n"
-    err = refusal(tmp_path, text=text)
+    err = scene_refusal(tmp_path, text=text)
     assert err.field == "size_m" and "line 4 and line 5" in err.problem
 
 
@@ -65,12 +57,16 @@ def test_a_key_in_two_different_mappings_is_not_a_duplicate(tmp_path):
     ("physics.grid", lambda s: s["physics"].update(grid=10 ** 6)),
 ])
 def test_sizes_and_times_outside_their_bounds_are_refused(tmp_path, field, edit):
-    assert refusal(tmp_path, edit).field == field
+    scene = tiny_scene_dict()
+    edit(scene)
+    assert scene_refusal(tmp_path, scene).field == field
 
 
 def test_an_image_path_that_is_a_folder_is_called_a_folder(tmp_path):
     (tmp_path / "photos").mkdir()
-    err = refusal(tmp_path, lambda s: s.update(image="photos"))
+    scene = tiny_scene_dict()
+    scene["image"] = "photos"
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "image" and "is a folder" in err.problem and "does not exist" not in err.problem
 
 

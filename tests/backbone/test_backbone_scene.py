@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import yaml
 
-from schemas import InputError, config_hash, load_scene, scene_json_schema, stage_keys
+from schemas import config_hash, load_scene, scene_json_schema, stage_keys
 
-from .conftest import tiny_scene_dict, write_scene
+from .conftest import scene_refusal, tiny_scene_dict, write_scene
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -29,17 +29,10 @@ def test_paths_resolve_relative_to_the_scene(scene_dir):
     assert scene.objects[0].mask == (scene_dir / "mask.png").resolve()
 
 
-def expect_error(folder: Path, scene: dict | None = None, text: str | None = None) -> InputError:
-    path = write_scene(folder, scene, text)
-    with pytest.raises(InputError) as info:
-        load_scene(path)
-    return info.value
-
-
 def test_unknown_key_names_key_and_place(tmp_path):
     scene = tiny_scene_dict()
     scene["objects"][0]["material"]["yield_stress"] = 1e4  # not a jelly key
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "objects[0].material.yield_stress"
     assert "unknown key" in err.problem and "scene.yaml" in err.file
 
@@ -47,7 +40,7 @@ def test_unknown_key_names_key_and_place(tmp_path):
 def test_out_of_range_poisson_ratio(tmp_path):
     scene = tiny_scene_dict()
     scene["objects"][0]["material"]["poisson_ratio"] = 0.5
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "objects[0].material.poisson_ratio" and "0.5" in err.problem
 
 
@@ -56,66 +49,66 @@ def test_out_of_range_poisson_ratio(tmp_path):
 def test_non_positive_values_are_refused(tmp_path, section, key, value):
     scene = tiny_scene_dict()
     scene[section][key] = value
-    assert expect_error(tmp_path, scene).field == f"{section}.{key}"
+    assert scene_refusal(tmp_path, scene).field == f"{section}.{key}"
 
 
 def test_unknown_preset_lists_the_presets(tmp_path):
     scene = tiny_scene_dict()
     scene["objects"][0]["material"] = {"preset": "rubber"}
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "objects[0].material" and "jelly" in err.problem
 
 
 def test_yaml_syntax_error_gives_line(tmp_path):
-    err = expect_error(tmp_path, text="image: photo.png\nobjects: [\n  {size_m: 0.2\n")
+    err = scene_refusal(tmp_path, text="image: photo.png\nobjects: [\n  {size_m: 0.2\n")
     assert "YAML syntax error at line" in err.problem and err.file.endswith("scene.yaml")
 
 
 def test_missing_image(tmp_path):
     scene = tiny_scene_dict()
     scene["image"] = "nothere.png"
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "image" and "nothere.png" in err.problem
 
 
 def test_unreadable_image(tmp_path):
     write_scene(tmp_path)
     (tmp_path / "photo.png").write_text("not a png")
-    err = expect_error(tmp_path)
+    err = scene_refusal(tmp_path)
     assert err.file.endswith("photo.png") and "cannot read" in err.problem
 
 
 def test_empty_mask(tmp_path):
     write_scene(tmp_path)
     cv2.imwrite(str(tmp_path / "mask.png"), np.zeros((48, 64), np.uint8))
-    err = expect_error(tmp_path)
+    err = scene_refusal(tmp_path)
     assert err.field == "objects[0].mask" and "empty" in err.problem
 
 
 def test_mask_of_other_size(tmp_path):
     write_scene(tmp_path)
     cv2.imwrite(str(tmp_path / "mask.png"), np.full((10, 10), 255, np.uint8))
-    err = expect_error(tmp_path)
+    err = scene_refusal(tmp_path)
     assert "10x10" in err.problem and "64x48" in err.problem
 
 
 def test_box_outside_image(tmp_path):
     scene = tiny_scene_dict()
     scene["objects"][0] = {"box": [10, 10, 80, 40], "size_m": 0.2}
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "objects[0].box" and "outside" in err.problem
 
 
 def test_condition_naming_a_missing_object(tmp_path):
     scene = tiny_scene_dict()
     scene["physics"]["conditions"][0]["object"] = 3
-    assert "object is 3" in expect_error(tmp_path, scene).problem
+    assert "object is 3" in scene_refusal(tmp_path, scene).problem
 
 
 def test_paragraph_names_file_field_and_fix(tmp_path):
     scene = tiny_scene_dict()
     scene["physics"]["fps"] = 0
-    text = expect_error(tmp_path, scene).paragraph()
+    text = scene_refusal(tmp_path, scene).paragraph()
     assert "scene.yaml" in text and "physics.fps" in text and "Fix:" in text
 
 
@@ -162,7 +155,7 @@ def test_exported_json_schema_is_current():
 def test_model_folders_resolve_or_are_refused(tmp_path):
     scene = tiny_scene_dict()
     scene["reconstruct"]["depth_model"] = "models/dpt"
-    err = expect_error(tmp_path, scene)
+    err = scene_refusal(tmp_path, scene)
     assert err.field == "reconstruct.depth_model" and "models/dpt" in err.problem
     (tmp_path / "models" / "dpt").mkdir(parents=True)
     assert load_scene(tmp_path).reconstruct.depth_model == (tmp_path / "models" / "dpt").resolve()
@@ -171,4 +164,4 @@ def test_model_folders_resolve_or_are_refused(tmp_path):
 def test_error_inside_a_condition_names_its_field(tmp_path):
     scene = tiny_scene_dict()
     scene["physics"]["conditions"][0]["velocity"] = [1.0, 2.0]  # an impulse's 'velocity' is also a condition type
-    assert expect_error(tmp_path, scene).field.startswith("physics.conditions[0].velocity")
+    assert scene_refusal(tmp_path, scene).field.startswith("physics.conditions[0].velocity")
