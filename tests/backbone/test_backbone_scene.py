@@ -112,27 +112,25 @@ def test_paragraph_names_file_field_and_fix(tmp_path):
     assert "scene.yaml" in text and "physics.fps" in text and "Fix:" in text
 
 
-def test_stage_keys_separate_the_stages(scene_dir):
-    scene = load_scene(scene_dir)
-    before = {s: config_hash(stage_keys(scene, s)) for s in ("reconstruct", "simulate", "render", "enhance")}
+def rehashed_stages(scene_dir: Path, edit) -> list[str]:
+    """The stages whose config hash changes when ``edit`` edits the scene's YAML mapping in place."""
+    stages = ("reconstruct", "simulate", "render", "enhance")
+    before = {s: config_hash(stage_keys(load_scene(scene_dir), s)) for s in stages}
     raw = yaml.safe_load((scene_dir / "scene.yaml").read_text())
-    raw["physics"]["fps"] = 12
+    edit(raw)
     write_scene(scene_dir, raw)
-    after = {s: config_hash(stage_keys(load_scene(scene_dir), s)) for s in before}
-    assert [s for s in before if before[s] != after[s]] == ["simulate"]
+    return [s for s in stages if config_hash(stage_keys(load_scene(scene_dir), s)) != before[s]]
+
+
+def test_stage_keys_separate_the_stages(scene_dir):
+    assert rehashed_stages(scene_dir, lambda raw: raw["physics"].update(fps=12)) == ["simulate"]
 
 
 def test_thickness_is_hashed_for_reconstruct_only_where_given(scene_dir):
     """objects[].thickness_m reruns reconstruct alone, and a scene without it hashes as before the key existed
     (the reconstruct key of a scene without it holds no thickness_m at all)."""
-    scene = load_scene(scene_dir)
-    assert "thickness_m" not in stage_keys(scene, "reconstruct")["objects"][0]
-    before = {s: config_hash(stage_keys(scene, s)) for s in ("reconstruct", "simulate", "render", "enhance")}
-    raw = yaml.safe_load((scene_dir / "scene.yaml").read_text())
-    raw["objects"][0]["thickness_m"] = 0.02
-    write_scene(scene_dir, raw)
-    after = {s: config_hash(stage_keys(load_scene(scene_dir), s)) for s in before}
-    assert [s for s in before if before[s] != after[s]] == ["reconstruct"]
+    assert "thickness_m" not in stage_keys(load_scene(scene_dir), "reconstruct")["objects"][0]
+    assert rehashed_stages(scene_dir, lambda raw: raw["objects"][0].update(thickness_m=0.02)) == ["reconstruct"]
 
 
 def test_hash_does_not_depend_on_where_the_scene_lives(tmp_path):
