@@ -58,10 +58,8 @@ Searched over the whole photograph, the shuttle's place beside scikit-image's as
 her hair, an eye and her suit (0042-the-fill-continues-its-surroundings.md)."""
 COARSE_PATCHES = 2
 """The pyramid's coarsest level is the one at which the hole is about this many patches thick: there the
-copies are chosen, and every finer level refines them. At 1 or 2 the periodic test textures are copied
-exactly and the astronaut's backdrop is continued; at 3 the loaf's brick floor blurs into streaks; on a
-hole as high as the photograph (tests/reconstruct) the error varies from 2 to 19/255 with the stripes'
-period and the height, at 1 as at 2 (0042-the-fill-continues-its-surroundings.md)."""
+copies are chosen, and every finer level refines them. At 1 a hole beside the astronaut's hair fills with a
+block of hair; at 3 the loaf's brick floor blurs into streaks (0042-the-fill-continues-its-surroundings.md)."""
 SEAM_WIDTH = 2
 """Width of the cross-fade from diffusion to exemplar fill, in dilation radii. Measured on the
 coffee scene, whose ring shows around the cup at rest: frame-0 PSNR 36.7 dB with Telea alone,
