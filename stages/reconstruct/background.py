@@ -257,8 +257,11 @@ def exemplar_fill(photo: np.ndarray, hole: np.ndarray, start: np.ndarray) -> np.
     # as far as the patches around the hole reach at the coarsest level
     margin = (PATCH_PX // 2 + 1) << levels
     hole_rows, hole_cols = np.nonzero(hole)
-    top, left, bottom, right = (margin if gap < margin else 0 for gap in (
-        hole_rows.min(), hole_cols.min(), hole.shape[0] - 1 - hole_rows.max(), hole.shape[1] - 1 - hole_cols.max()))
+    height_px, width_px = hole.shape
+    top, left, bottom, right = (margin if box_gap == 0 and hole_gap < margin else 0 for box_gap, hole_gap in (
+        (rows.min(), hole_rows.min()), (cols.min(), hole_cols.min()),
+        (height_px - 1 - rows.max(), height_px - 1 - hole_rows.max()),
+        (width_px - 1 - cols.max(), width_px - 1 - hole_cols.max())))
     pad = lambda image, **kw: cv2.copyMakeBorder(image, top, bottom, left, right, **kw)  # noqa: E731
     unknown = pad(hole[box].astype(np.uint8), borderType=cv2.BORDER_CONSTANT, value=1) > 0
     copied = copied_patches(pad(photo[box], borderType=cv2.BORDER_REFLECT), unknown,
