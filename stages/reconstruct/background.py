@@ -50,7 +50,7 @@ EXEMPLAR_MAX_PX = 1024
 faster than the pixel count (a hole of 24 % of the photograph: 2.1 s at 451 px wide, 10.7 s at
 902, 60 s at 1804 on 2 cores), and the video is rarely wider (render.width defaults to 512)."""
 DIFFUSION_RADIUS_PX = 5
-"""Neighbourhood of Telea's method along the seam."""
+"""Neighbourhood of Telea's method: the fill along the seam, and where the exemplar fill starts from."""
 SOURCE_REACH = 1.0
 """Patches are copied from known pixels at most this many hole thicknesses (twice the largest distance
 inside the hole to its edge) from the hole, and at least 4 patches: the hole continues its surroundings.
