@@ -34,7 +34,7 @@ from schemas.video import even_size
 from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
                        facets, grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
                        pores, rest_ray_colours, surface_under, undilated)
-from .silhouette import STILL_PX, narrowed_to_mask
+from .silhouette import STILL_PX, TURN_TOWARDS, narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, full_camera, inverse_deformation, map_moments, rest_visibility,
                          source_points, source_roughness, source_spread, surface_normals, to_camera, visibility)
@@ -97,6 +97,7 @@ class Particles(NamedTuple):
     narrowing: torch.Tensor
     fading: torch.Tensor
     rest_pixels: torch.Tensor
+    rest_facing: torch.Tensor
     camera: splat.Camera
 
     def at(self, F: torch.Tensor, positions: torch.Tensor) -> tuple[torch.Tensor, ...]:
@@ -111,10 +112,15 @@ class Particles(NamedTuple):
         flowing material (whose colour then stands for the material, not for its place in the
         photograph), and 0 for the interior."""
         mixed = self.mixing(positions, F)
-        # narrowed to the mask as far as it has moved from where it stood in the photograph
+        # narrowed to the mask as far as it has moved from where it stood in the photograph, while it still
+        # faces the camera as it did there (turned towards it, its reach past the mask lies over the body)
         K = torch.as_tensor(self.camera.K, dtype=positions.dtype, device=positions.device)
         moved_px = (project_points(to_camera(positions, self.camera.world_to_camera), K) - self.rest_pixels).norm(dim=1)
-        moved = (1 - torch.exp(-(moved_px / STILL_PX) ** 2)).to(self.narrowing.dtype)
+        ray = to_camera(positions, self.camera.world_to_camera)
+        facing = facing_normals(self.rest_normals, positions, inverse_deformation(F), self.camera.world_to_camera)
+        turned = (-(facing * ray).sum(1) / ray.norm(dim=1).clamp_min(1e-12) - self.rest_facing).clamp_min(0)
+        moved = ((1 - torch.exp(-(moved_px / STILL_PX) ** 2)) * torch.exp(-(turned / TURN_TOWARDS) ** 2)).to(
+            self.narrowing.dtype)
         size = 1 - moved * (1 - self.narrowing)
         rest = size[:, None, None] ** 2 * self.rest_covariances
         shape = (1 - mixed[:, None, None]) * rest + mixed[:, None, None] * self.grain_covariances
@@ -123,6 +129,15 @@ class Particles(NamedTuple):
         opacities = (1 - mixed) * self.opacities * fading * self.opaque_at_rest + mixed * self.grain_opacities
         drawn = positions + mixed[:, None] * self.grain_offsets.to(positions.dtype)
         return drawn, F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
+
+
+def facing_towards(normals: torch.Tensor, means: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
+    """(P,) in [0, 1]: how squarely each particle's surface (rest normals (P, 3), world frame, at means (P, 3),
+    m) faces the camera, |n . d| with d the unit ray to it: 0 edge-on, at the silhouette; 1 facing it."""
+    identity = torch.eye(3, dtype=means.dtype, device=means.device).expand(len(means), 3, 3)
+    facing = facing_normals(normals, means, identity, camera.world_to_camera)
+    ray = to_camera(means, camera.world_to_camera)
+    return (-(facing * ray).sum(1) / ray.norm(dim=1).clamp_min(1e-12)).clamp(0, 1)
 
 
 def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifact, camera: splat.Camera,
@@ -194,6 +209,7 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
         fading=torch.cat([fading, torch.ones(N, dtype=fading.dtype, device=device)]),
         rest_pixels=project_points(to_camera(rest_means, camera.world_to_camera),
                                    torch.as_tensor(camera.K, dtype=rest_means.dtype, device=device)),
+        rest_facing=facing_towards(torch.cat([normals, normals[under]]), rest_means, camera),
         camera=camera)
 
 

@@ -36,6 +36,12 @@ DILATION_PX2 = 0.3
 STILL_PX = 0.5
 """How far (output px) a Gaussian's picture moves from where it stood at rest over which it is narrowed:
 1 - exp(-(m / STILL_PX)^2), as pm-enhance judges a pixel to stand still (compositing.standing_still)."""
+TURN_TOWARDS = 0.25
+"""How much more squarely than at rest (|n . d|, n its surface normal, d the ray to it) a moved Gaussian may
+face the camera and still be narrowed (render.Particles.at: by exp(-(excess / TURN_TOWARDS)^2)). Turned
+towards the camera a silhouette Gaussian lies over the body: turned by theta about an axis in the picture,
+a body R px in radius brings its silhouette R (1 - cos theta) inwards, over a 3 px fringe at R = 50 px from
+theta = 20 degrees on (|n . d| = sin theta = 0.34)."""
 BISECTIONS = 12
 """Halvings of the interval of a Gaussian's size factor (to 1/4096)."""
 
@@ -64,7 +70,8 @@ def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: 
     The size factor is the largest f with min over the pixels beyond of d^T (f^2 S + D)^-1 d at least
     REACH_SIGMAS^2 (bisection; d from its centre). Where the dilation alone reaches further (a Gaussian within
     the tolerance past the mask, whose antialiased dot spills over), f is 0 and the opacity is scaled to a
-    tenth there. Pixels are read within MAX_WINDOW_PX of the centre. A Gaussian whose centre lies outside the
+    tenth there; one whose centre's pixel lies beyond is faded to 0 (tenths stacked along a limb, front and
+    back, add up to its alpha). Pixels are read within MAX_WINDOW_PX of the centre. A Gaussian whose centre lies outside the
     picture, or of an object the mask does not show, is left as it is.
 
     Args:
@@ -113,5 +120,7 @@ def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: 
             size[chunk] = torch.where(fits, 1.0, low)
             # alpha at the nearest pixel beyond of the dilation's dot alone, over the opacity
             spill = torch.exp(-0.5 * nearest(torch.zeros_like(low)))
-            fade[chunk] = torch.where(fits, 1.0, (0.1 / spill).clamp(max=1.0))
+            # one whose centre's own pixel lies beyond is none of the object: faded dots stack along a limb
+            centre_beyond = past[:, len(offsets) // 2]
+            fade[chunk] = torch.where(fits, 1.0, torch.where(centre_beyond, 0.0, (0.1 / spill).clamp(max=1.0)))
     return size, fade

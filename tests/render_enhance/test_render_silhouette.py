@@ -11,6 +11,7 @@ from stages.render.render import render_video
 from stages.render.silhouette import REACH_SIGMAS, SILHOUETTE_TOLERANCE_PX, narrowed_to_mask
 
 from .test_enhance_silhouette import H, W, fringed_gaussians
+from .test_render_flow import turned_sphere
 
 
 def test_a_narrowed_gaussian_stays_within_a_pixel_of_the_mask():
@@ -18,8 +19,9 @@ def test_a_narrowed_gaussian_stays_within_a_pixel_of_the_mask():
     narrowing, each one's alpha over its opacity as splat draws it, o' exp(-d^T (f^2 S + 0.3 I)^-1 d / 2) (S its
     projected covariance, from its own pinhole derivative, o' its opacity factor), at every pixel centre more
     than SILHOUETTE_TOLERANCE_PX past the disc's edge (half a pixel more from its pixels' centres) is at most a
-    tenth (REACH_SIGMAS), and within 2 % of a tenth where it was narrowed (no narrower than needed); many keep
-    their size exactly, many are narrowed, none grows."""
+    tenth (REACH_SIGMAS), and within 2 % of a tenth where it was narrowed (no narrower than needed), unless its
+    centre's own pixel lies beyond (then its opacity is 0); many keep their size exactly, many are narrowed,
+    none grows."""
     size, focal = 80, 100.0
     K = np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]])
     camera = splat.Camera(K, np.eye(4), size, size)
@@ -48,7 +50,10 @@ def test_a_narrowed_gaussian_stays_within_a_pixel_of_the_mask():
         drawn_covariance = f * f * J @ C @ J.T + 0.3 * np.eye(2)
         drawn = o * np.exp(-0.5 * np.einsum("...i,ij,...j->...", d, np.linalg.inv(drawn_covariance), d))
         assert drawn[beyond].max() <= tenth * (1 + 1e-6)
-        if f < 1:
+        centre_pixel = (int(np.floor(focal * x / z + size / 2)), int(np.floor(focal * y / z + size / 2)))
+        if beyond[centre_pixel[1], centre_pixel[0]]:
+            assert o == 0  # none of the object
+        elif f < 1:
             assert drawn[beyond].max() >= 0.98 * tenth
     assert (factor == 1).sum() > 50 and (factor < 1).sum() > 50
 
@@ -87,3 +92,32 @@ def test_a_moved_object_carries_no_fringe():
     assert coarse.alpha[1][distance > SILHOUETTE_TOLERANCE_PX + 1.5].max() < 0.1
     inner = cv2.erode(moved.astype(np.uint8), np.ones((3, 3), np.uint8)) > 0
     assert coarse.alpha[1][inner].min() > 0.99
+
+
+def test_a_turned_limb_is_drawn_as_fitted():
+    """surfel_sphere (test_render_flow) under a mask 3 px inside its picture, so that its limb reaches past
+    it, turned 60 degrees about the vertical (turned_sphere): the limb, turned towards the camera, lies over
+    the body and is drawn as fitted. The turned frame's alpha is splat's render of the turned Gaussians as
+    they are, within 0.05, over the mask (the limb near the axis, at the top and bottom, stays at the
+    silhouette, and narrowed); moved sideways instead (no turn), the same sphere is narrowed (its alpha 3 px
+    past the moved mask falls under a tenth, from above 1/2)."""
+    gaussians, trajectories, centre, radius, turn = turned_sphere(60.0)
+    size = gaussians.width
+    rows, cols = np.mgrid[0:size, 0:size] + 0.5 - size / 2
+    picture_px = radius * gaussians.K[0, 0] / np.sqrt(centre[2] ** 2 - radius ** 2)
+    gaussians.mask = (np.hypot(rows, cols) < picture_px - 3).astype(np.uint8)
+    coarse = render_video(gaussians, trajectories, width=size, device="cpu")
+    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
+    rest = splat.covariances_from_scales_rotations(t(gaussians.scales), t(gaussians.rotations))
+    R = t(turn)
+    camera = splat.Camera(gaussians.K, gaussians.world_to_camera, size, size)
+    as_fitted = splat.rasterize(t(trajectories.positions[1]), t(gaussians.opacities), torch.ones(len(rest), 1), camera,
+                                covariances=R @ rest @ R.T).alpha.numpy()
+    on = gaussians.mask > 0  # the limb at the top and bottom, near the axis, stays at the silhouette: narrowed
+    assert np.abs(coarse.alpha[1][on] - as_fitted[on]).max() < 0.05
+    shifted = render_video(gaussians, shifted_right(gaussians, 6), width=size, device="cpu")
+    moved = np.hypot(rows, cols - 6) < picture_px - 3
+    beyond = cv2.distanceTransform((~moved).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE) > 3
+    rest_beyond = cv2.distanceTransform((gaussians.mask == 0).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE) > 3
+    assert coarse.alpha[0][rest_beyond].max() > 0.5
+    assert shifted.alpha[1][beyond].max() < 0.1
