@@ -5,8 +5,9 @@ import math
 import pytest
 
 from schemas import InputError, load_scene
+from testing.tiny_scene import make_photo, tiny_scene_dict, write_scene
 
-from .conftest import scene_refusal, tiny_scene_dict, write_scene
+from .conftest import scene_refusal
 
 
 NON_FINITE = [
@@ -82,8 +83,6 @@ def test_pm_setup_refused_at_start_leaves_nothing_behind(tmp_path, capsys):
     import socket
 
     from stages.setup import cli as setup_cli
-
-    from .conftest import make_photo
 
     def start(*args) -> int:
         with pytest.raises(SystemExit) as exit_info:

@@ -17,8 +17,8 @@ from schemas.artifacts import GaussiansArtifact, read_artifact, write_artifact
 from schemas.files import check_writable, partial_name, write_file
 from schemas.images import write_image
 from schemas.video import write_video
+from testing.tiny_scene import write_scene
 
-from .conftest import write_scene
 from .mounts import tmpfs
 from .test_backbone_artifacts import random_coarse, random_gaussians
 

@@ -5,8 +5,7 @@ import pytest
 
 from schemas import InputError, config_hash, load_scene, stage_keys
 from schemas.images import read_hints
-
-from .conftest import tiny_scene_dict, write_scene
+from testing.tiny_scene import tiny_scene_dict, write_scene
 
 
 def boxed_scene(folder, **obj):

@@ -7,8 +7,7 @@ from PIL import Image, ImageOps
 from schemas import load_scene
 from schemas.images import read_image
 from stages.reconstruct.segment import read_photo
-
-from .conftest import tiny_scene_dict
+from testing.tiny_scene import tiny_scene_dict
 
 EXIF_ORIENTATION = 0x0112
 

@@ -10,8 +10,7 @@ from stages.enhance.cli import main as enhance
 from stages.reconstruct.cli import main as reconstruct
 from stages.simulate.cli import main as simulate
 from stages.render.cli import main as render
-
-from .conftest import write_scene
+from testing.tiny_scene import write_scene
 
 
 def refusal(capsys, program, *args) -> str:

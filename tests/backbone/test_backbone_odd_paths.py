@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
+from testing.tiny_scene import write_scene
 from testing.workflow import ENV, run_snakemake
 
-from .conftest import write_scene
 from .mounts import resize, tmpfs
 
 ODD_SCENE = "my ball (v2) [ü].x"

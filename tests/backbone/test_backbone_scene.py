@@ -8,8 +8,9 @@ import pytest
 import yaml
 
 from schemas import config_hash, load_scene, scene_json_schema, stage_keys
+from testing.tiny_scene import tiny_scene_dict, write_scene
 
-from .conftest import scene_refusal, tiny_scene_dict, write_scene
+from .conftest import scene_refusal
 
 REPO = Path(__file__).resolve().parents[2]
 

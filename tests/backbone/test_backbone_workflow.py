@@ -12,9 +12,10 @@ import yaml
 
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArtifact, read_artifact
 from schemas.video import read_video
+from testing.tiny_scene import tiny_scene_dict, write_scene
 from testing.workflow import BIN, ENV, run_snakemake, snakemake_command
 
-from .conftest import snakemake, tiny_scene_dict, write_scene
+from .conftest import snakemake
 
 
 def planned_jobs(workdir: Path) -> dict:

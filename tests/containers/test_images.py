@@ -9,9 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from testing.tiny_scene import write_scene
 from testing.workflow import run_snakemake
-
-from ..backbone.conftest import write_scene
 
 REPO = Path(__file__).resolve().parents[2]
 PYPROJECT = tomllib.loads((REPO / "pyproject.toml").read_text())

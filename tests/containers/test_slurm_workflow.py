@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from schemas.video import read_video
+from testing.tiny_scene import write_scene
 from testing.workflow import run_snakemake, with_programs
 
-from ..backbone.conftest import tiny_run, write_scene  # noqa: F401 (tiny_run: a fixture)
+from ..backbone.conftest import tiny_run  # noqa: F401 (a fixture)
 from .slurm_cluster import slurm_cluster, why_unavailable
 
 # This cluster has no accounting database (sacct cannot answer) and one user with no account.

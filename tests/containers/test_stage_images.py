@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from schemas.video import read_video
+from testing.tiny_scene import write_scene
 from testing.workflow import with_programs
 
-from ..backbone.conftest import write_scene
 from .stage_images import build_images, docker, run_in_image, why_unavailable
 
 TAG = version("physmotion")
