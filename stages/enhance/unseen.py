@@ -286,6 +286,12 @@ class Continuation:
         ``still`` (h, w) in [0, 1]: how much the pixel stands where its source is; the photograph's
         pixels along the silhouette, which mix in the background, are its own only there."""
         a = self.albedo
+        # A source beyond the photograph's border (the cut of an object the border cuts) lies on none of
+        # its objects (``inside`` falls to 0 there), but its colour and shading are the border pixels':
+        # the zeros beyond the border would darken the colour and drive the gain to MAX_GAIN beside it.
+        inside = sample_at(a.inside, uv)
+        height, width = a.shading_rest.shape
+        uv = np.clip(uv, 0.5, (width - 0.5, height - 0.5))
         shading_then = sample_at(a.shading_rest, uv)
         recorded = sample_at(a.recorded, uv)
         facing_then = sample_at(np.nan_to_num(a.facing_rest), uv)
@@ -297,7 +303,7 @@ class Continuation:
         from_fine = to_linear(self.photograph_at(uv))
         gain = np.clip(shading_now / np.maximum(shading_then, 1e-6), 1 / MAX_GAIN, MAX_GAIN)[..., None]
         continued = sample_at(a.continued, uv) * shading_now[..., None]
-        return own * from_fine * gain + (1 - own) * continued, shading_then, sample_at(a.inside, uv)
+        return own * from_fine * gain + (1 - own) * continued, shading_then, inside
 
     def __call__(self, t: int, uv: np.ndarray, seen: np.ndarray, rendered: np.ndarray, surface: np.ndarray,
                  unseen_from_photo: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
