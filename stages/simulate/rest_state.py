@@ -18,9 +18,10 @@ equilibrium of the sagged body instead, which on a narrow foot is another pose
 The settle is paid only where it matters (`why_not_settled`,
 docs/decisions/0020-settle-where-it-matters.md): a body whose static sag
 rho g H^2 / (2 E) is under a tenth of a grid cell starts unstressed (its fall
-into its weight is smaller than the grid resolves), sand never settles (a
-heap has no elastic shape to hold), and a body tossed off the ground at t = 0
-carries no load. It lasts at most SETTLE_SHARE of the run's substeps.
+into its weight is smaller than the grid resolves) unless it is snow, which
+compacts plastically on its contact (docs/decisions/0039-granular-substeps.md),
+sand never settles (a heap has no elastic shape to hold), and a body tossed
+off the ground at t = 0 carries no load. It lasts at most SETTLE_SHARE of the run's substeps.
 
 The ground lies through the objects' lowest point (simulation.py): a body
 stands because its base carries it, and `support_margin` says whether it does.
@@ -142,7 +143,11 @@ def why_not_settled(material, height: float, cell: float, gravity: float, lifted
 
     Sand has no elastic shape to hold (a heap finds its slope in the run); a body tossed off the ground at
     t = 0 (`lifted`) carries no load; and a body whose column sag rho g H^2 / (2 E) (gravity m/s^2) is
-    under SAG_CELLS of a `cell` m grid cell falls into its weight by less than the grid resolves."""
+    under SAG_CELLS of a `cell` m grid cell falls into its weight by less than the grid resolves. Snow
+    settles whatever its elastic sag: where it stands on a contact its weight compacts it plastically
+    past its critical compression, by more than its elastic sag (the 23 cm ball of
+    benchmarks/examples.py: 2.5 mm held up against an elastic 0.72 mm), and started unstressed it rings
+    on that contact (docs/decisions/0039-granular-substeps.md)."""
     if material.preset == "sand":
         return "sand: a heap has no elastic shape to hold, it finds its slope in the run"
     if lifted:
@@ -151,7 +156,7 @@ def why_not_settled(material, height: float, cell: float, gravity: float, lifted
     if sag > height:  # no stress holds it up: settling would only chase its slump, for as long as that takes
         return (f"its sag under its weight, rho g H^2 / 2E = {sag:.3g} m, is beyond its {1e3 * height:.0f} mm "
                 f"height: it cannot stand and slumps from t = 0")
-    if sag < SAG_CELLS * cell:
+    if sag < SAG_CELLS * cell and material.preset != "snow":
         return (f"its sag under its weight, rho g H^2 / 2E = {1e3 * sag:.3g} mm, is under {SAG_CELLS:g} of a "
                 f"{1e3 * cell:.2f} mm cell")
     return None

@@ -42,6 +42,11 @@ BLOW_UP_FACTOR = 10.0
 # a cell, nor more than in the frame before, is at rest: while no condition acts, the next frame is the
 # same (docs/decisions/0021-frames-at-rest.md, 0034-rest-judged-on-mass.md).
 QUIET_CELLS = 0.05
+# ... where each object's motion is the largest but that of this share of its particles, its fastest: a few
+# grains of a heap that has stopped, at the grid's edge, are pushed off it by the unbalanced pressure of the
+# sand beyond, which flies freely and no longer scatters to the grid
+# (docs/decisions/0039-granular-substeps.md). A body of fewer than 1 / RESTLESS_SHARE particles sets none aside.
+RESTLESS_SHARE = 1.0e-4
 # The settle says how far it has come this often, in seconds.
 SETTLE_LOG_EVERY_S = 10.0
 # The grid follows the particles with this many free cells inside its wall layers.
@@ -463,13 +468,14 @@ class Simulation:
         """Whether the world of frame f is at rest and stays so over the next frame: every object stands on the
         ground (within a cell of it) or is held by a fixed condition, or there is no gravity; over frame f no
         particle moved more than QUIET_CELLS of a cell, nor more than over the frame before (nothing is
-        setting out); and no condition acts, starts or ends between frame f - 1 and frame f + 1 (a fixed one
-        holds still what it holds). A body slow at the top of its flight is not at rest: nothing carries it.
-        The particles' speeds are not asked: a stiff body's surface particles jitter at centimetres a second
-        over fractions of a millimetre. Only the particles that carry mass are asked how far they moved: the
-        massless Gaussians push nothing and follow the grid's velocity about them, and a few of them at a
-        contact, their stencils half below the ground, slide along it by a fit of the nodes beside them
-        while the body stands (docs/decisions/0034-rest-judged-on-mass.md)."""
+        setting out), each object's fastest RESTLESS_SHARE of its particles set aside; and no condition acts,
+        starts or ends between frame f - 1 and frame f + 1 (a fixed one holds still what it holds). A body
+        slow at the top of its flight is not at rest: nothing carries it. The particles' speeds are not asked:
+        a stiff body's surface particles jitter at centimetres a second over fractions of a millimetre. Only
+        the particles that carry mass are asked how far they moved: the massless Gaussians push nothing and
+        follow the grid's velocity about them, and a few of them at a contact, their stencils half below the
+        ground, slide along it by a fit of the nodes beside them while the body stands
+        (docs/decisions/0034-rest-judged-on-mass.md)."""
         if f < 2:
             return False
         if np.linalg.norm(self.gravity_world) > 0:
@@ -490,10 +496,21 @@ class Simulation:
             if c.type not in ("fixed", "impulse") and c.start_s <= until and (c.end_s is None or c.end_s > since):
                 return False
         quiet = QUIET_CELLS * self.grid.dx
-        heavy = self._carries_mass
-        moved = float(np.max(np.abs(positions[f, heavy] - positions[f - 1, heavy]), initial=0.0))
-        before = float(np.max(np.abs(positions[f - 1, heavy] - positions[f - 2, heavy]), initial=0.0))
+        moved = self._motion(positions[f] - positions[f - 1])
+        before = self._motion(positions[f - 1] - positions[f - 2])
         return moved <= quiet and moved <= before
+
+    def _motion(self, step: np.ndarray) -> float:
+        """How far (m) the bodies moved by `step` (P,3) m: the largest move along an axis of a particle that
+        carries mass, each object's fastest RESTLESS_SHARE of its particles set aside."""
+        heavy = self._carries_mass
+        along, objects = np.max(np.abs(step[heavy]), axis=1), self.object_id[heavy]
+        largest = 0.0
+        for k in np.unique(objects):
+            moves = along[objects == k]
+            aside = int(RESTLESS_SHARE * len(moves))
+            largest = max(largest, float(np.partition(moves, len(moves) - 1 - aside)[len(moves) - 1 - aside]))
+        return largest
 
     def _record(self, f: int, positions: np.ndarray, F: np.ndarray, diag: dict) -> None:
         """Store frame f: world positions, world F of every particle, and the diagnostics."""
