@@ -4,15 +4,14 @@ pm-simulate fills each object's volume with a lattice of particles behind its
 surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
 a Gaussian of its own (as PhysGaussian renders its filled particles):
 
-- colour: the photograph's on its rest ray (:func:`rest_ray_colours`), a brittle solid's crumb
-  (:func:`crumb_colours`); its rest normal is that of the surface it lies under, the nearest opaque
-  Gaussian of its object at rest (:func:`surface_under`);
+- colour and rest normal: those of the surface it lies under, the nearest opaque Gaussian of its object at
+  rest (:func:`surface_under`); a brittle solid's colour is its crumb (:func:`crumb_colours`);
 - opacity: :data:`INTERIOR_OPACITY`, solid material;
 - covariance: round, of standard deviation :data:`GRAIN_SIGMA` lattice spacings
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
-Where the material flows (:class:`Mixing`: granular flow, a tear), every particle,
-surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`): a
+Where the material flows (:class:`Mixing`: granular flow, a tear; never an elastic solid's,
+:data:`ELASTIC`), every particle, surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`): a
 solid's round and on its lattice; sand's and snow's of varied sizes, elongated and turned at random, each
 moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`: a heap shows no
 lattice). A grain takes the photograph's colour where its rest
@@ -64,6 +63,11 @@ OPAQUE_SURFACE = 0.5
 the reconstruction's soft edges and floaters)."""
 GRANULAR = ("sand", "snow")
 """The presets whose grains take the photograph's colours on their rest rays once they flow."""
+ELASTIC = ("jelly",)
+"""The presets that only deform elastically, neither yielding nor tearing: their material never flows
+(:class:`Mixing`). What their particles depart from F is the simulation's, where a held region meets a pushed
+one (the coffee's cup: a fifth of its particles above 0.05), and drawn as grains it shows a jelly's wall as
+discs in single pixels' colours of the photograph."""
 POROUS = ("fracture", "foam")
 """The presets whose broken or torn material shows pores (pores): crumb, a cake's or a sponge's inside. A ductile
 solid (jelly, metal, plasticine) that flows stays a continuous material of its colours."""

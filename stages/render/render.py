@@ -31,7 +31,7 @@ from schemas.camera import project_points
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
+from .interior import (ELASTIC, GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
                        facets, grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
                        pores, rest_ray_colours, surface_under, undilated)
 from .silhouette import STILL_PX, TURN_TOWARDS, narrowed_to_mask
@@ -62,8 +62,8 @@ class Particles(NamedTuple):
     grain_colours; its rest covariance, opacity and colour where its object has no lattice);
     opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
     (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
-    at rest (a fill particle: the photograph's on its rest ray, or a brittle solid's crumb,
-    interior.crumb_colours); rest_seen (P,) visibility in the photograph
+    at rest (a fill particle: the surface Gaussian's it lies under, interior.surface_under, or a brittle solid's
+    crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
     relief (P,) how much a grain of sand or snow is lit from above once its material flows
@@ -163,12 +163,14 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     N = len(sigma)
     granular = np.isin(trajectories.material_id, [PRESETS.index(p) for p in GRANULAR])
     porous = np.isin(trajectories.material_id, [PRESETS.index(p) for p in POROUS])
+    elastic = np.isin(trajectories.material_id, [PRESETS.index(p) for p in ELASTIC])
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
-    # broken brittle material shows its crumb; any other interior the colour of the surface in front of it
+    # broken brittle material shows its crumb; any other interior, where its surface opens, that surface's
+    # colour: the photograph on its ray may hold a highlight's single pixel, which the fitted surface averages away
     crumb = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
-    fill_colors = torch.where(t(porous[G:])[:, None], crumb, on_rest_ray[G:])
+    fill_colors = torch.where(t(porous[G:])[:, None], crumb, colors[under].clamp(0, 1))
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
@@ -178,8 +180,8 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     has_lattice = spacing.isfinite()
     rest_colors = torch.cat([colors, fill_colors])
     # a grain shows the material at its place: a surface Gaussian's own colour may hold the background it was
-    # fitted beside (the silhouette's), the photograph 2 px inside its object's does not
-    grain_from = torch.where(t(trajectories.is_gaussian)[:, None], on_rest_ray, rest_colors)
+    # fitted beside (the silhouette's), the photograph 2 px inside its object's does not; a crumb is its object's
+    grain_from = torch.where(t(porous & ~trajectories.is_gaussian)[:, None], rest_colors, on_rest_ray)
     # a heap's grains catch the light each its own way; a torn solid's are one matrix, its pores its texture
     shaded_grains = torch.where((has_lattice & t(granular))[:, None],
                                 t(grain_colours(grain_from.cpu().numpy())).to(colors.dtype), grain_from)
@@ -191,7 +193,8 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
         grain_offsets=torch.where(t(granular)[:, None], t(grain_offsets(spacing.cpu().numpy())), 0.0),
         grain_covariances=torch.where(has_lattice[:, None, None], t(grain_shape).to(covariances.dtype),
                                       rest_covariances),
-        mixing=Mixing(rest_means, trajectories.object_id, spacing),
+        # an elastic solid never flows (inf: no lattice to flow past)
+        mixing=Mixing(rest_means, trajectories.object_id, torch.where(t(elastic), torch.inf, spacing)),
         opacities=opacities,
         grain_opacities=torch.where(has_lattice, t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
