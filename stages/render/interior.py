@@ -4,17 +4,19 @@ pm-simulate fills each object's volume with a lattice of particles behind its
 surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
 a Gaussian of its own (as PhysGaussian renders its filled particles):
 
-- colour and rest normal: those of the surface it lies under, the nearest opaque Gaussian of its object at
-  rest (:func:`surface_under`); a brittle solid's colour is its crumb (:func:`crumb_colours`);
+- colour: the surface's in front of it at rest, the Gaussians' render on its rest ray
+  (:func:`fitted_photograph`, :func:`rest_ray_colours`), a brittle solid's crumb (:func:`crumb_colours`);
+  its rest normal is that of the surface it lies under, the nearest opaque Gaussian of its object at rest
+  (:func:`surface_under`);
 - opacity: :data:`INTERIOR_OPACITY`, solid material;
 - covariance: round, of standard deviation :data:`GRAIN_SIGMA` lattice spacings
   (:func:`lattice_spacing`), deformed by the particle's own F like any Gaussian.
 
 Where the material flows (:class:`Mixing`: granular flow, a tear; never an elastic solid's,
-:data:`ELASTIC`), every particle, surface Gaussians included, becomes a hard grain of about a lattice spacing (:func:`grain_shapes`): a
-solid's round and on its lattice; sand's and snow's of varied sizes, elongated and turned at random, each
-moved off its lattice site by a random fraction of the cell (:func:`grain_offsets`: a heap shows no
-lattice). A grain takes the photograph's colour where its rest
+:data:`ELASTIC`), every particle, surface Gaussians included, becomes a hard grain of about a lattice
+spacing (:func:`grain_shapes`): a solid's round and on its lattice; sand's and snow's of varied sizes,
+elongated and turned at random, each moved off its lattice site by a random fraction of the cell
+(:func:`grain_offsets`: a heap shows no lattice). A grain takes the photograph's colour where its rest
 position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it
 belongs to, so a heap shows both); a brittle solid's interior, the crumbs of its torn face, the colour of its
 object's lit half (:func:`crumb_colours`), with pores (:func:`pores`). A grain of sand is a little brighter or
@@ -243,6 +245,17 @@ def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: n
         r, c = nearest_row[row[members], col[members]], nearest_col[row[members], col[members]]
         colours[members] = photo[r, c] / 255.0
     return colours
+
+
+def fitted_photograph(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colors: torch.Tensor,
+                      camera: splat.Camera) -> np.ndarray:
+    """(H, W, 3) u8 RGB: the surface Gaussians (means (G, 3), m; covariances (G, 3, 3), m^2; opacities (G,);
+    colors (G, 3)) rendered at rest in the photograph's ``camera``, their colour over their alpha (black where
+    they draw none): the photograph as the fit sees it, its single pixels' highlights and noise averaged away."""
+    with torch.no_grad():
+        render = splat.rasterize(means, opacities, colors, camera, covariances=covariances)
+    colour = render.features / render.alpha[..., None].clamp_min(1e-6)
+    return (colour.clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
 
 
 def crumb_colours(object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray) -> np.ndarray:

@@ -31,9 +31,9 @@ from schemas.camera import project_points
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (ELASTIC, GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours, grain_colours,
-                       facets, grain_offsets, grain_relief, grain_shapes, hidden_at_rest, lattice_spacing, lit_caps,
-                       pores, rest_ray_colours, surface_under, undilated)
+from .interior import (ELASTIC, GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours,
+                       facets, fitted_photograph, grain_colours, grain_offsets, grain_relief, grain_shapes,
+                       hidden_at_rest, lattice_spacing, lit_caps, pores, rest_ray_colours, surface_under, undilated)
 from .silhouette import STILL_PX, TURN_TOWARDS, narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, full_camera, inverse_deformation, map_moments, rest_visibility,
@@ -62,8 +62,8 @@ class Particles(NamedTuple):
     grain_colours; its rest covariance, opacity and colour where its object has no lattice);
     opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
     (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
-    at rest (a fill particle: the surface Gaussian's it lies under, interior.surface_under, or a brittle solid's
-    crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
+    at rest (a fill particle: the surface's in front of it at rest, interior.fitted_photograph, or a brittle
+    solid's crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
     relief (P,) how much a grain of sand or snow is lit from above once its material flows
@@ -167,10 +167,13 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
-    # broken brittle material shows its crumb; any other interior, where its surface opens, that surface's
-    # colour: the photograph on its ray may hold a highlight's single pixel, which the fitted surface averages away
+    # broken brittle material shows its crumb; any other interior the colour of the surface in front of it, as
+    # the fit draws it: the photograph on its ray may hold a highlight's single pixel, which the fit averages away
     crumb = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
-    fill_colors = torch.where(t(porous[G:])[:, None], crumb, colors[under].clamp(0, 1))
+    fitted = fitted_photograph(means, covariances, opacities, colors, full_camera(gaussians))
+    in_front = t(rest_ray_colours(trajectories.rest_positions[fill].astype(np.float64), trajectories.object_id[fill],
+                                  fitted, gaussians.mask, gaussians.K, gaussians.world_to_camera)).to(colors.dtype)
+    fill_colors = torch.where(t(porous[G:])[:, None], crumb, in_front)
     log.info("%d Gaussians and %d interior particles, %d of them transparent until their material flows "
              "(they would show at rest, at the rim or behind translucent surface)", G, N, N - int(hidden.sum()))
     eye = torch.eye(3, dtype=covariances.dtype, device=device)
