@@ -72,7 +72,7 @@ one (the coffee's cup: a fifth of its particles above 0.05), and drawn as grains
 discs in single pixels' colours of the photograph."""
 POROUS = ("fracture", "foam")
 """The presets whose broken or torn material shows pores (pores): crumb, a cake's or a sponge's inside. A ductile
-solid (jelly, metal, plasticine) that flows stays a continuous material of its colours."""
+solid (metal, plasticine) that flows stays a continuous material of its colours."""
 GRAIN_OPACITY = 50.0
 """Opacity of a grain of flowing material (alpha = min(0.99, opacity exp(-r^2 / 2 sigma^2)), so above 1
 a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
