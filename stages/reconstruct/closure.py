@@ -67,6 +67,16 @@ def down_direction(pitch_deg: float) -> np.ndarray:
     return np.array([0.0, math.cos(p), math.sin(p)])
 
 
+def across_view(view: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The normal (3,) of the plane across the unit direction `view` (3,), not normalised, and whether that
+    plane is vertical: the view made horizontal (gravity along `down` (3,)), or, seen from above (the
+    horizontal part shorter than STEEPEST_VERTICAL_PLANE), the view itself."""
+    normal = view - (view @ down) * down
+    if np.linalg.norm(normal) < STEEPEST_VERTICAL_PLANE:
+        return view, False
+    return normal, True
+
+
 @dataclass
 class FacingView:
     """The silhouette as a camera at the input camera's centre, turned to face the object, sees it: its
@@ -238,9 +248,7 @@ def ball_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: float
     radius = radius * disc_cover_scale(view.mask, axis_r, axis_c, radius)
     focal = view.K[1, 1]
     unit_extent = union_extent(np.stack([axis_r, axis_c], axis=-1)[view.mask], radius[view.mask], focal)
-    towards = view.R[2] - (view.R[2] @ down) * down  # the plane's normal: the view axis made horizontal
-    if np.linalg.norm(towards) < STEEPEST_VERTICAL_PLANE:  # looking down on it: a plane across the view
-        towards = view.R[2]
+    towards, _ = across_view(view.R[2], down)  # the plane's normal
 
     def balls(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Centres (N,3) on the plane X . towards = 1 and radii (N,) of the balls of facing pixels (N,)."""
@@ -303,9 +311,7 @@ def cut_to_thickness(thickness: float, mask: np.ndarray, K: np.ndarray, t_in: np
     volume = np.where(np.isfinite(t_in) & np.isfinite(t_out), t_out ** 3 - t_in ** 3, 0.0)
     centre = (volume * np.nan_to_num(0.5 * (t_in + t_out))) @ rays / volume.sum()
     view = centre / np.linalg.norm(centre)
-    normal = view - (view @ down) * down
-    if np.linalg.norm(normal) < STEEPEST_VERTICAL_PLANE:
-        normal = view
+    normal, _ = across_view(view, down)
     normal = normal / np.linalg.norm(normal)
     along = rays @ normal
     middle, half = float(centre @ normal), 0.5 * thickness

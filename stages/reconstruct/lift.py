@@ -23,6 +23,7 @@ from scipy.spatial.transform import Rotation
 
 from schemas.camera import pixel_rays
 
+from .closure import across_view
 from .depth import ObjectDepth
 
 SIGMA_PER_SPACING = 0.6
@@ -46,9 +47,6 @@ REACH_SPACINGS = 3.0
 the mirror image is hidden, of its own place, from the unseen surface already coloured)."""
 NORMAL_STEP = 0.01
 """The normals' central differences span this share of the body's extent."""
-STEEPEST_VERTICAL_PLANE = 0.26
-"""Seen from more than 75 degrees above, the mirror plane lies across the view instead of vertical (as the
-closure's balls' plane does)."""
 PLANE_STEPS = 41
 PLANE_YAW_DEG = 10.0
 """The mirror plane is searched on PLANE_STEPS offsets across the body, then as many within a step, then as
@@ -183,17 +181,17 @@ def outward_normals(body, points: np.ndarray) -> np.ndarray:
 
 def mirror_plane(means: np.ndarray, seen: np.ndarray, down: np.ndarray, spacing: float) -> tuple[np.ndarray, float]:
     """The plane of symmetry of the body whose surface the Gaussians at ``means`` (G,3) m cover, points x with
-    x . normal = offset: vertical (gravity along ``down`` (3,)) and across the view, placed and turned (by up
-    to PLANE_YAW_DEG about the vertical) so that the mirror images of the unseen Gaussians (``seen`` (G,) bool)
-    lie nearest the surface, their median distance to the nearest Gaussian least; of the turns within a tenth
+    x . normal = offset: across the view, vertical (gravity along ``down`` (3,)) unless seen from above
+    (closure.across_view), placed and turned (by up to PLANE_YAW_DEG about the vertical) so that the mirror
+    images of the unseen Gaussians (``seen`` (G,) bool) lie nearest the surface, their median distance to the nearest Gaussian least; of the turns within a tenth
     of the sample ``spacing`` (m) of the least, the one nearest across the view (a body of revolution is
     symmetric about every vertical plane through its axis). A centre of volume misses the plane by the
     weight of a handle or a cut (4 mm on the coffee cup)."""
     centre = means.mean(axis=0)
     view = centre / np.linalg.norm(centre)
-    normal = view - (view @ down) * down
-    if np.linalg.norm(normal) < STEEPEST_VERTICAL_PLANE:
-        normal, down = view, np.cross(view, [1.0, 0.0, 0.0])
+    normal, vertical = across_view(view, down)
+    if not vertical:  # seen from above: the plane across the view turns about the picture's vertical
+        down = np.cross(view, [1.0, 0.0, 0.0])
     normal = normal / np.linalg.norm(normal)
     across = np.cross(down, normal)
     tree = cKDTree(means)
