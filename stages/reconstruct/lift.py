@@ -183,10 +183,10 @@ def mirror_plane(means: np.ndarray, seen: np.ndarray, down: np.ndarray, spacing:
     """The plane of symmetry of the body whose surface the Gaussians at ``means`` (G,3) m cover, points x with
     x . normal = offset: across the view, vertical (gravity along ``down`` (3,)) unless seen from above
     (closure.across_view), placed and turned (by up to PLANE_YAW_DEG about the vertical) so that the mirror
-    images of the unseen Gaussians (``seen`` (G,) bool) lie nearest the surface, their median distance to the nearest Gaussian least; of the turns within a tenth
-    of the sample ``spacing`` (m) of the least, the one nearest across the view (a body of revolution is
-    symmetric about every vertical plane through its axis). A centre of volume misses the plane by the
-    weight of a handle or a cut (4 mm on the coffee cup)."""
+    images of the unseen Gaussians (``seen`` (G,) bool) lie nearest the surface, their median distance to the
+    nearest Gaussian least; of the turns within a tenth of the sample ``spacing`` (m) of the least, the one
+    nearest across the view (a body of revolution is symmetric about every vertical plane through its axis).
+    A centre of volume misses the plane by the weight of a handle or a cut (4 mm on the coffee cup)."""
     centre = means.mean(axis=0)
     view = centre / np.linalg.norm(centre)
     normal, vertical = across_view(view, down)
