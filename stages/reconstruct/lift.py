@@ -179,6 +179,13 @@ def outward_normals(body, points: np.ndarray) -> np.ndarray:
     return gradient / np.maximum(np.linalg.norm(gradient, axis=1, keepdims=True), 1e-12)
 
 
+def reflect(points: np.ndarray, plane: tuple[np.ndarray, float]) -> np.ndarray:
+    """Mirror images (P,3) of points (P,3) m across ``plane`` (unit normal (3,), offset m: x . normal = offset);
+    directions (normals) reflect across the plane through the origin, offset 0."""
+    normal, offset = plane
+    return points - 2.0 * (points @ normal - offset)[:, None] * normal
+
+
 def mirror_plane(means: np.ndarray, seen: np.ndarray, down: np.ndarray, spacing: float) -> tuple[np.ndarray, float]:
     """The plane of symmetry of the body whose surface the Gaussians at ``means`` (G,3) m cover, points x with
     x . normal = offset: across the view, vertical (gravity along ``down`` (3,)) unless seen from above
@@ -198,7 +205,7 @@ def mirror_plane(means: np.ndarray, seen: np.ndarray, down: np.ndarray, spacing:
     unseen = means[~seen]
 
     def miss(normal: np.ndarray, offset: float) -> float:
-        mirrored = unseen - 2.0 * (unseen @ normal - offset)[:, None] * normal
+        mirrored = reflect(unseen, (normal, offset))
         return float(np.median(tree.query(mirrored)[0]))
 
     along = means @ normal
@@ -238,9 +245,8 @@ def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, n
     recorded = seen & (facing >= RECORDED_FACING)
     if len(unseen) == 0 or not recorded.any():
         return out
-    normal, offset = plane
-    mirrored = means[unseen] - 2.0 * (means[unseen] @ normal - offset)[:, None] * normal
-    mirrored_normals = normals[unseen] - 2.0 * (normals[unseen] @ normal)[:, None] * normal
+    mirrored = reflect(means[unseen], plane)
+    mirrored_normals = reflect(normals[unseen], (plane[0], 0.0))
     recorded_index = np.flatnonzero(recorded)
     distance, near = cKDTree(means[recorded]).query(mirrored, k=neighbours, distance_upper_bound=reach)
     found = np.isfinite(distance)
