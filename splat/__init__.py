@@ -13,6 +13,7 @@ _wp.init()  # from_torch and launches need the runtime; init is idempotent
 
 from .camera import Camera
 from .covariance import covariances_from_scales_rotations
+from .project import DILATION_PX2
 from .rasterize import Render, rasterize
 
-__all__ = ["Camera", "Render", "covariances_from_scales_rotations", "rasterize"]
+__all__ = ["Camera", "DILATION_PX2", "Render", "covariances_from_scales_rotations", "rasterize"]

@@ -17,8 +17,10 @@ from .launch import launch, torch_single_threaded
 
 NEAR_PLANE = wp.constant(0.01)
 """Gaussians whose mean has camera-space z below this are culled (metres)."""
-DILATION = wp.constant(0.3)
+DILATION_PX2 = 0.3
 """Added to the 2D covariance diagonal (px^2): anti-aliasing as in 3DGS."""
+DILATION = wp.constant(DILATION_PX2)
+"""DILATION_PX2 as the kernel's constant."""
 FOV_CLAMP = 1.3
 """The Jacobian is evaluated at the mean clamped to this many times the field of view."""
 

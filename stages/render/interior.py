@@ -125,8 +125,6 @@ LAYERS_PER_RENDER = 32
 """Depth layers of transmittance per render (channels; transmittance_layers)."""
 REACH_SIGMAS = math.sqrt(2 * math.log(255))
 """How far a Gaussian of opacity 1 reaches in standard deviations: to alpha 1/255 (splat's cut-off)."""
-DILATION_PX2 = 0.3
-"""splat's EWA dilation of every projected covariance (px^2)."""
 
 
 def lattice_spacing(spacing: float, is_gaussian: np.ndarray, object_id: np.ndarray) -> np.ndarray:
@@ -441,9 +439,9 @@ def facets(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tens
 
 def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
     """(P, 3, 3) m^2: the covariances (P, 3, 3) of the particles at means (P, 3), world, m, with splat's
-    dilation (DILATION_PX2 added to every projected covariance) taken back out of the hard grains, by their
-    weight ``hard`` (P,) in [0, 1] (how far their material flows): DILATION_PX2 (z / f)^2 off every axis, at
-    most 3/4 of the smallest.
+    dilation (splat.DILATION_PX2 added to every projected covariance) taken back out of the hard grains, by
+    their weight ``hard`` (P,) in [0, 1] (how far their material flows): splat.DILATION_PX2 (z / f)^2 off
+    every axis, at most 3/4 of the smallest.
 
     The dilation is an antialiasing filter for soft Gaussians. It grows a hard grain's picture, whose edge
     is at alpha 1/2, by about 0.3 px / its radius in px: a grain 1.2 px across is drawn 2 px across, and at
@@ -452,7 +450,7 @@ def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor
     if len(weight) == 0:
         return covariances
     z = to_camera(means[weight], camera.world_to_camera)[:, 2].clamp_min(1e-9)
-    dilation = DILATION_PX2 * (z / float(camera.K[0, 0])) ** 2
+    dilation = splat.DILATION_PX2 * (z / float(camera.K[0, 0])) ** 2
     grains = covariances[weight]
     smallest = torch.linalg.eigvalsh(grains)[:, 0].clamp_min(0)
     taken = hard[weight].to(grains.dtype) * torch.minimum(dilation.to(grains.dtype), 0.75 * smallest)
@@ -536,7 +534,7 @@ def exposure(positions: torch.Tensor, sigma: torch.Tensor, means: torch.Tensor, 
     transmittance = transmittance_layers(means, covariances, opacities, depths, camera)
     K = torch.as_tensor(camera.K, dtype=positions.dtype, device=device)
     uv = project_points(in_camera, K)
-    sigma_px2 = (sigma * K[0, 0] / z.clamp_min(1e-9)) ** 2 + DILATION_PX2
+    sigma_px2 = (sigma * K[0, 0] / z.clamp_min(1e-9)) ** 2 + splat.DILATION_PX2
     half = int(math.ceil(float(REACH_SIGMAS * sigma_px2.max().sqrt()))) + 1
     steps = torch.arange(-half, half + 1, device=device)
     offsets = torch.stack(torch.meshgrid(steps, steps, indexing="xy"), -1).reshape(-1, 2)
@@ -590,7 +588,7 @@ def hidden_at_rest(rest_positions: torch.Tensor, sigma: torch.Tensor, spacing: t
         room_px = torch.where(inside, room[row, col] - 0.5, 0.0)  # from the particle's pixel's edge
         behind = in_camera.norm(dim=1) > surface.depth[row, col] / surface.alpha[row, col].clamp_min(OPAQUE_ALPHA)
         px_per_m = K[0, 0] / in_camera[:, 2].clamp_min(1e-9)
-        fits_px2 = (room_px.clamp_min(0) / REACH_SIGMAS) ** 2 - DILATION_PX2
+        fits_px2 = (room_px.clamp_min(0) / REACH_SIGMAS) ** 2 - splat.DILATION_PX2
         hidden = inside & behind & (fits_px2 > 0)
         sigma = torch.where(hidden, torch.minimum(sigma, fits_px2.clamp_min(0).sqrt() / px_per_m), 0.0)
         eye = torch.eye(3, dtype=surface_covariances.dtype, device=device)

@@ -31,8 +31,6 @@ REACH_SIGMAS = math.sqrt(2 * math.log(10))
 opacity (2.1)."""
 MAX_WINDOW_PX = 16
 """Half the side of the largest window of pixels read around a Gaussian's centre (px)."""
-DILATION_PX2 = 0.3
-"""splat's EWA dilation of every projected covariance (px^2)."""
 STILL_PX = 0.5
 """How far (output px) a Gaussian's picture moves from where it stood at rest over which it is narrowed:
 1 - exp(-(m / STILL_PX)^2), as pm-enhance judges a pixel to stand still (compositing.standing_still)."""
@@ -48,7 +46,12 @@ BISECTIONS = 12
 
 def projected_covariances(means: torch.Tensor, covariances: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
     """(G, 2, 2) px^2: each Gaussian's (means (G, 3), world, m; covariances (G, 3, 3), m^2) own covariance in
-    the picture, J R C R^T J^T, J the pinhole's derivative at its centre (without splat's dilation)."""
+    the picture, J R C R^T J^T, J the pinhole's derivative at its centre (without splat's dilation).
+
+    splat.project's EWA projection is not reused: it returns only the dilated covariance's inverse (its
+    conic), in float32, where narrowed_to_mask scales the covariance itself before it adds the dilation; and
+    its FOV_CLAMP changes only Gaussians centred outside the picture, which narrowed_to_mask leaves as they
+    are."""
     R = torch.as_tensor(np.asarray(camera.world_to_camera)[:3, :3], dtype=means.dtype, device=means.device)
     x = to_camera(means, camera.world_to_camera)
     z = x[:, 2].clamp_min(1e-9)
@@ -82,7 +85,7 @@ def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: 
     K = torch.as_tensor(np.asarray(camera.K), dtype=dtype, device=device)
     uv = project_points(to_camera(means, camera.world_to_camera), K)
     S = projected_covariances(means, covariances, camera)
-    D = DILATION_PX2 * torch.eye(2, dtype=dtype, device=device)
+    D = splat.DILATION_PX2 * torch.eye(2, dtype=dtype, device=device)
     H, W = labels.shape
     size = torch.ones(len(means), dtype=dtype, device=device)
     fade = torch.ones(len(means), dtype=dtype, device=device)
