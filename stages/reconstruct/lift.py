@@ -45,6 +45,9 @@ SPREAD_COS = 0.95
 REACH_SPACINGS = 3.0
 """It looks for that surface within this many of the back's sample spacings of its mirror image (or, where
 the mirror image is hidden, of its own place, from the unseen surface already coloured)."""
+NEIGHBOURS = 12
+"""How many of the nearest Gaussians (within the reach) are searched for an agreeing normal, round a mirror
+image or a Gaussian the colour spreads to: more than the 8 of a sheet's nearest ring."""
 NORMAL_STEP = 0.01
 """The normals' central differences span this share of the body's extent."""
 PLANE_STEPS = 41
@@ -224,7 +227,7 @@ def mirror_plane(means: np.ndarray, seen: np.ndarray, down: np.ndarray, spacing:
 
 def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, normals: np.ndarray,
                       plane: tuple[np.ndarray, float], reach: float, K: np.ndarray, size: tuple[int, int],
-                      kept: np.ndarray, neighbours: int = 12) -> np.ndarray:
+                      kept: np.ndarray) -> np.ndarray:
     """(G,3) colours of Gaussians at ``means`` (G,3) m, ``colors`` (G,3) as lifted (each its pixel's), where
     those not ``seen`` (G,) bool take the colour of the seen surface they continue.
 
@@ -248,7 +251,7 @@ def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, n
     mirrored = reflect(means[unseen], plane)
     mirrored_normals = reflect(normals[unseen], (plane[0], 0.0))
     recorded_index = np.flatnonzero(recorded)
-    distance, near = cKDTree(means[recorded]).query(mirrored, k=neighbours, distance_upper_bound=reach)
+    distance, near = cKDTree(means[recorded]).query(mirrored, k=NEIGHBOURS, distance_upper_bound=reach)
     found = np.isfinite(distance)
     near = recorded_index[np.where(found, near, 0)]
     agree = found & (np.einsum("gkc,gc->gk", normals[near], mirrored_normals) >= AGREE_COS)
@@ -268,7 +271,7 @@ def continued_colours(means: np.ndarray, colors: np.ndarray, seen: np.ndarray, n
         pending = np.flatnonzero(~settled)
         if len(pending) == 0:
             break
-        distance, near = tree.query(means[pending], k=neighbours, distance_upper_bound=reach)
+        distance, near = tree.query(means[pending], k=NEIGHBOURS, distance_upper_bound=reach)
         found = np.isfinite(distance)
         near = np.where(found, near, 0)
         usable = found & coloured[near] & (np.einsum("gkc,gc->gk", normals[near], normals[pending]) >= SPREAD_COS)
