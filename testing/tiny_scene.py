@@ -37,6 +37,8 @@ def tiny_scene_dict() -> dict:
 
 
 def write_scene(folder: Path, scene: dict | None = None, text: str | None = None) -> Path:
+    """Write folder/scene.yaml (the scene dict, or the raw text where a test needs malformed YAML; by default
+    tiny_scene_dict()) beside the tiny photograph (written once): the scene file's path."""
     folder.mkdir(parents=True, exist_ok=True)
     if not (folder / "photo.png").exists():
         make_photo(folder)

@@ -18,11 +18,10 @@ from schemas.files import check_writable, partial_name, write_file
 from schemas.images import write_image
 from schemas.video import write_video
 from testing.tiny_scene import write_scene
+from testing.workflow import BIN
 
 from .mounts import tmpfs
 from .test_backbone_artifacts import random_coarse, random_gaussians
-
-BIN = Path(sys.executable).parent
 
 
 def big_coarse():
