@@ -54,7 +54,7 @@ DIFFUSION_RADIUS_PX = 5
 SOURCE_REACH = 1.0
 """Patches are copied from known pixels at most this many hole thicknesses (twice the largest distance
 inside the hole to its edge) from the hole, and at least 4 patches: the hole continues its surroundings.
-Searched over the whole photograph, the shuttle's place beside scikit-image's astronaut was filled with
+Searched over the whole photograph, the fill of the shuttle's place beside scikit-image's astronaut copies
 her hair, an eye and her suit (0042-the-fill-continues-its-surroundings.md)."""
 COARSE_PATCHES = 2
 """The pyramid's coarsest level is the one at which the hole is about this many patches thick: there the

@@ -46,7 +46,7 @@ def test_the_fill_continues_the_backdrop_and_copies_no_face():
     """Where the object stood the fill is the backdrop's continuation: no pixel of it looks more like the
     face's skin or eyes than like the backdrop there (by more than 40/255), and its mean error is within
     the backdrop's own mottling. Searched over the whole photograph, starting from black at a pyramid level
-    one patch across, the fill carried the dark eyes in from the border (87 pixels, mean error 4.3)."""
+    one patch across, the fill carries the dark eyes in from the border (87 pixels, mean error 4.3)."""
     backdrop, photo, obj = mottled_wall_with_a_face()
     background, error, copies = fill_and_copies(photo, obj, backdrop, SKIN, EYE)
     assert copies == 0
@@ -77,8 +77,8 @@ def striped_ball_on_a_grained_table(height=240, width=320):
 def test_the_fill_of_a_hole_in_the_table_copies_no_ball():
     """The hole in the table is filled with table: no pixel of it looks more like the ball's stripes
     than like the table there (by more than 40/255), and its mean error stays within the grain's phase
-    (the grain's amplitude is 20). At a coarsest level one patch across for the whole photograph the
-    fill was a second striped ball (3176 pixels, mean error 45.9)."""
+    (the grain's amplitude is 20). With a coarsest level one patch across for the whole photograph, the
+    fill is a second striped ball (3176 pixels, mean error 45.9)."""
     table, photo, hole = striped_ball_on_a_grained_table()
     _, error, copies = fill_and_copies(photo, hole, table, RED, YELLOW)
     assert copies == 0

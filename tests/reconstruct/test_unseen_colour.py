@@ -23,8 +23,8 @@ is 215 levels away)."""
 def test_the_unseen_side_of_a_cup_seen_from_above_takes_the_side_s_colour_not_the_top_s(tmp_path):
     """An upright cylinder (r = 40 mm, 70 mm tall) under a camera pitched 35 degrees, reconstructed with 50
     iterations: every Gaussian the photograph does not see on the back of its side (facing away by more
-    than FACING_AWAY) is within LEVELS of the side's red. Before the unseen surfaces continued the seen ones,
-    75 % of them took the white of the top the camera sees in front of them."""
+    than FACING_AWAY) is within LEVELS of the side's red. Coloured by the pixel in front of them instead,
+    75 % of them take the white of the top the camera sees in front of them."""
     pitch = 35.0
     cup = PaintedCylinder(np.array([0.0, 0.02, 0.33]), standing_axes(pitch), 0.04, 0.07)
     scene = load_scene(write_scene(tmp_path, cup, width=160, height=120, iterations=50, pitch_deg=pitch))
