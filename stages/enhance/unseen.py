@@ -39,7 +39,8 @@ log = logging.getLogger("physmotion.enhance.unseen")
 RECORDED_FACING = (0.3, 0.55)
 """Cosine between the surface's normal and the view ray (at rest) from which the photograph's pixel
 starts to be, and is fully, a record of the surface's colour. Below, a pixel spans a strip of surface
-(at 0.3, more than three times its width along it) and its colour is the limb's dark, blurred rim."""
+(at 0.3, more than three times its width along it) and its colour is the limb's dark, blurred rim.
+The first is the twin of stages/reconstruct/lift.py's RECORDED_FACING: change both together."""
 UNCHANGED = 0.2
 """Change of the facing cosine (and of the shading, as a share of the brightest) over which a pixel the
 photograph recorded poorly goes from its own pixel (seen as it was: at rest the video is the

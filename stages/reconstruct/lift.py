@@ -38,7 +38,8 @@ AGREE_COS = 0.8
 a cup's outer wall, not the rim or the inside above it."""
 RECORDED_FACING = 0.3
 """A seen surface whose normal meets the view ray at a cosine under this is a poor record of its colour (a pixel
-spans more than three times its width along it; enhance/unseen.py's RECORDED_FACING starts there too)."""
+spans more than three times its width along it). Its twin is the first of stages/enhance/unseen.py's
+RECORDED_FACING (a stage imports no other): change both together."""
 SPREAD_COS = 0.95
 """Where the mirror image shows no such surface, the colour spreads between neighbours whose normals lie within
 18 degrees: over a curved face, not round an edge (a cup's outer wall onto its flat cut base)."""
