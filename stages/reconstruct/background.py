@@ -262,11 +262,15 @@ def exemplar_fill(photo: np.ndarray, hole: np.ndarray, start: np.ndarray) -> np.
         (rows.min(), hole_rows.min()), (cols.min(), hole_cols.min()),
         (height_px - 1 - rows.max(), height_px - 1 - hole_rows.max()),
         (width_px - 1 - cols.max(), width_px - 1 - hole_cols.max())))
-    pad = lambda image, **kw: cv2.copyMakeBorder(image, top, bottom, left, right, **kw)  # noqa: E731
-    unknown = pad(hole[box].astype(np.uint8), borderType=cv2.BORDER_CONSTANT, value=1) > 0
-    copied = copied_patches(pad(photo[box], borderType=cv2.BORDER_REFLECT), unknown,
-                            pad(sources[box].astype(np.uint8), borderType=cv2.BORDER_CONSTANT, value=0) > 0,
-                            pad(start[box], borderType=cv2.BORDER_REFLECT), levels)
+
+    def pad(image: np.ndarray, border_type: int, value: int = 0) -> np.ndarray:
+        """``image`` (the box's pixels) with those margins added, filled by cv2's border_type (or value)."""
+        return cv2.copyMakeBorder(image, top, bottom, left, right, borderType=border_type, value=value)
+
+    unknown = pad(hole[box].astype(np.uint8), cv2.BORDER_CONSTANT, 1) > 0
+    copied = copied_patches(pad(photo[box], cv2.BORDER_REFLECT), unknown,
+                            pad(sources[box].astype(np.uint8), cv2.BORDER_CONSTANT, 0) > 0,
+                            pad(start[box], cv2.BORDER_REFLECT), levels)
     filled = photo.astype(np.float32)
     filled[box] = copied[top:copied.shape[0] - bottom, left:copied.shape[1] - right]
     filled = np.where(hole[..., None], np.clip(filled + 0.5, 0, 255), photo).astype(np.uint8)
