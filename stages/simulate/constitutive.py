@@ -19,7 +19,7 @@ import warp as wp
 
 from schemas.materials import PRESETS
 
-from .state import Particles
+from .state import Particles, Step
 
 # Integer tags of the presets inside kernels, in PRESETS order.
 JELLY, METAL, SAND, PLASTICINE, FOAM, SNOW, RIGID, FRACTURE = range(8)
@@ -278,11 +278,10 @@ def snow_factor(mat: MaterialParams, Jp: float, stiffening: float):
 
 
 @wp.kernel
-def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(dtype=MaterialParams),
-                  particles: Particles):
-    """Return-map F (trial -> elastic part) and write V_p * Kirchhoff stress (N m); dt in s, materials
-    indexed by the particles' object_id; snow's hardening factor at most `stiffening`, what the substep
-    was sized for.
+def update_stress(start: int, substep: Step, materials: wp.array(dtype=MaterialParams), particles: Particles):
+    """Return-map F (trial -> elastic part) and write V_p * Kirchhoff stress (N m) over a substep of
+    `substep.dt` s; materials indexed by the particles' object_id; snow's hardening factor at most
+    `substep.stiffening`, what the substep was sized for.
 
     Where F is near a rotation (near_rotation_strain) the Hencky strain and the plastic step are matrix
     series and no SVD is taken: snow only where none of its principal stretches is clamped. Elsewhere
@@ -309,7 +308,7 @@ def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(
             if mat.kind == SNOW or mat.kind == FRACTURE:
                 R = symmetric_exp(-strain) * Fp
                 if mat.kind == SNOW:  # unclamped: no plastic volume change
-                    h = snow_factor(mat, history[p], stiffening)
+                    h = snow_factor(mat, history[p], substep.stiffening)
                     tau = fixed_corotated_kirchhoff(Fp, R, h * mat.mu, h * mat.lam)
                 else:
                     lo, hi = eigenvalue_range(strain)
@@ -324,7 +323,7 @@ def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(
             else:  # sand, metal, plasticine, foam
                 tr = wp.trace(strain)
                 deviator = strain - (tr / 3.0) * I
-                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], dt, tr,
+                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], substep.dt, tr,
                                                                  wp.sqrt(wp.ddot(deviator, deviator)))
                 history[p] = history[p] + d_strain
                 step = -dev_share * deviator - (volume_share * tr / 3.0) * I
@@ -345,7 +344,7 @@ def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(
                 Jp = history[p] * (sig[0] * sig[1] * sig[2]) / (clamped[0] * clamped[1] * clamped[2])
                 history[p] = Jp
                 Fp = U * wp.diag(clamped) * wp.transpose(V)
-                h = snow_factor(mat, Jp, stiffening)
+                h = snow_factor(mat, Jp, substep.stiffening)
                 tau = fixed_corotated_kirchhoff(Fp, U * wp.transpose(V), h * mat.mu, h * mat.lam)
             elif mat.kind == FRACTURE:
                 # damage grows irreversibly with the largest principal stretch
@@ -361,7 +360,7 @@ def update_stress(start: int, dt: float, stiffening: float, materials: wp.array(
                 eps = log_stretch(sig)
                 tr = eps[0] + eps[1] + eps[2]
                 dev = eps - wp.vec3(tr / 3.0)
-                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], dt, tr, wp.length(dev))
+                dev_share, volume_share, d_strain = plastic_flow(mat, history[p], substep.dt, tr, wp.length(dev))
                 history[p] = history[p] + d_strain
                 eps = eps - dev_share * dev - wp.vec3(volume_share * tr / 3.0)
                 Fp = U * wp.diag(exp_stretch(eps)) * wp.transpose(V)

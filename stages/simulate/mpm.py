@@ -549,7 +549,7 @@ class MPMSolver:
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
         step, cracks, nodes, particles = self.step, self.crack.state, self.nodes, self.particles
-        step.dt = dt
+        step.dt, step.stiffening = dt, self.stiffening
         if self.n_fields == 2:
             self.crack.find(self)
         self._per_particle((PARTICLE_TO_GRID[self.n_fields], lambda s, part: [s, part, step, particles, cracks, nodes]))
@@ -563,7 +563,7 @@ class MPMSolver:
             ])
         g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles])
         flight = (free_flight, lambda s, part: [s, step, nodes, particles])
-        stress = (update_stress, lambda s, part: [s, dt, self.stiffening, self.materials, particles])
+        stress = (update_stress, lambda s, part: [s, step, self.materials, particles])
         if self.rigid is None:
             self._per_particle(flight, g2p, stress)
         else:  # the rigid projection gathers every rigid particle's G2P velocity first

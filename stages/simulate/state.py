@@ -61,9 +61,10 @@ class Cracks:
 
 @wp.struct
 class Step:
-    """One substep's length and the laws that act on the grid."""
+    """One substep's length and the laws that act on the grid and the particles' stress."""
 
     dt: float  # s
+    stiffening: float  # the largest hardening factor snow's stress reaches (mpm.MPMSolver.stiffening)
     gravity: wp.vec3  # m/s^2
     ground_kind: int  # mpm.GROUND_NONE ... GROUND_FRICTION
     friction: float  # Coulomb coefficient of the ground

@@ -17,7 +17,7 @@ import warp as wp
 from schemas import materials as M
 from stages.simulate.constitutive import (SNOW_HARDENING_MAX, SNOW_HARDENING_MIN, initial_history, lame_parameters,
                                           params_array, update_stress)
-from stages.simulate.state import Particles
+from stages.simulate.state import Particles, Step
 
 DT = 1e-4  # s
 N = 400
@@ -101,8 +101,9 @@ def kernel(material, F: np.ndarray, history: np.ndarray, device: str) -> tuple[n
     p.volume_stress = wp.zeros(n, dtype=wp.mat33, device=device)
     p.volume = wp.array(np.ones(n, np.float32), dtype=float, device=device)
     p.object_id = wp.zeros(n, dtype=wp.int32, device=device)
-    wp.launch(update_stress, dim=n, device=device, inputs=[0, DT, SNOW_HARDENING_MAX,
-                                                           params_array([material], device), p])
+    step = Step()
+    step.dt, step.stiffening = DT, SNOW_HARDENING_MAX
+    wp.launch(update_stress, dim=n, device=device, inputs=[0, step, params_array([material], device), p])
     return tuple(a.numpy().astype(np.float64) for a in (p.F, p.history, p.volume_stress))
 
 
