@@ -386,7 +386,7 @@ def elastic_energy_density(mat: MaterialParams, F: wp.mat33, history: float):
     if mat.kind == JELLY or mat.kind == SNOW or mat.kind == FRACTURE:
         scale = 1.0
         if mat.kind == SNOW:
-            scale = wp.clamp(wp.exp(mat.hardening * (1.0 - history)), SNOW_HARDENING_MIN, SNOW_HARDENING_MAX)
+            scale = snow_factor(mat, history, SNOW_HARDENING_MAX)
         J = sig[0] * sig[1] * sig[2]
         s1 = sig - wp.vec3(1.0)
         return scale * (mat.mu * wp.dot(s1, s1) + 0.5 * mat.lam * (J - 1.0) * (J - 1.0))
