@@ -115,10 +115,10 @@ class Particles(NamedTuple):
         # narrowed to the mask as far as it has moved from where it stood in the photograph, while it still
         # faces the camera as it did there (turned towards it, its reach past the mask lies over the body)
         K = torch.as_tensor(self.camera.K, dtype=positions.dtype, device=positions.device)
-        moved_px = (project_points(to_camera(positions, self.camera.world_to_camera), K) - self.rest_pixels).norm(dim=1)
         ray = to_camera(positions, self.camera.world_to_camera)
-        facing = facing_normals(self.rest_normals, positions, inverse_deformation(F), self.camera.world_to_camera)
-        turned = (-(facing * ray).sum(1) / ray.norm(dim=1).clamp_min(1e-12) - self.rest_facing).clamp_min(0)
+        moved_px = (project_points(ray, K) - self.rest_pixels).norm(dim=1)
+        facing = facing_towards(self.rest_normals, positions, self.camera, inverse_deformation(F), ray)
+        turned = (facing - self.rest_facing).clamp_min(0)
         moved = ((1 - torch.exp(-(moved_px / STILL_PX) ** 2)) * torch.exp(-(turned / TURN_TOWARDS) ** 2)).to(
             self.narrowing.dtype)
         size = 1 - moved * (1 - self.narrowing)
@@ -131,12 +131,21 @@ class Particles(NamedTuple):
         return drawn, F @ shape @ F.transpose(1, 2), opacities, colors, self.surface * (1 - mixed)
 
 
-def facing_towards(normals: torch.Tensor, means: torch.Tensor, camera: splat.Camera) -> torch.Tensor:
-    """(P,) in [0, 1]: how squarely each particle's surface (rest normals (P, 3), world frame, at means (P, 3),
-    m) faces the camera, |n . d| with d the unit ray to it: 0 edge-on, at the silhouette; 1 facing it."""
-    identity = torch.eye(3, dtype=means.dtype, device=means.device).expand(len(means), 3, 3)
-    facing = facing_normals(normals, means, identity, camera.world_to_camera)
-    ray = to_camera(means, camera.world_to_camera)
+def facing_towards(normals: torch.Tensor, means: torch.Tensor, camera: splat.Camera,
+                   F_inverse: torch.Tensor | None = None, ray: torch.Tensor | None = None) -> torch.Tensor:
+    """(P,) in [0, 1]: how squarely each particle's surface (rest normals (P, 3), world frame, carried by the
+    deformation, F^-T n, at means (P, 3), m) faces the camera, |n . d| with d the unit ray to it: 0 edge-on,
+    at the silhouette; 1 facing it.
+
+    Args:
+        F_inverse: (P, 3, 3) source_map.inverse_deformation of each particle's F; None at rest (the identity).
+        ray: (P, 3) the means in the camera frame (m), where the caller has them already.
+    """
+    if F_inverse is None:
+        F_inverse = torch.eye(3, dtype=means.dtype, device=means.device).expand(len(means), 3, 3)
+    if ray is None:
+        ray = to_camera(means, camera.world_to_camera)
+    facing = facing_normals(normals, means, F_inverse, camera.world_to_camera)
     return (-(facing * ray).sum(1) / ray.norm(dim=1).clamp_min(1e-12)).clamp(0, 1)
 
 
