@@ -44,7 +44,8 @@ MIN_STRETCH = 1.0e-2
 # Where Y = (F F^T - I)(F F^T + I)^-1 is at most this (Frobenius) norm and det F > 0, the return mapping
 # takes the Hencky strain as a matrix series and no SVD (`near_rotation_strain`): every principal
 # stretch within 0.73 .. 1.36. Float32's SVD costs about 0.6 us a particle on the CPU and is good to
-# 1e-4; the series costs a quarter of that and is good to 1e-7 (docs/decisions/0039-granular-substeps.md).
+# 1e-4; the series costs a quarter of that and is good to 1.4e-7 in float32, its truncation at |Y| = 0.3
+# 1.1e-8 (docs/decisions/0039-granular-substeps.md).
 SERIES_REACH = 0.3
 
 
@@ -188,8 +189,9 @@ def exp_stretch(eps: wp.vec3):
 @wp.func
 def near_rotation_strain(F: wp.mat33):
     """(Left Hencky strain log V of F = V R, whether F is near enough a rotation for it): the series
-    atanh Y = Y + Y^3/3 + Y^5/5 + ... of Y = (b - I)(b + I)^-1, b = F F^T (log b = 2 atanh Y), to under
-    1e-8, where det F > 0 and |Y| <= SERIES_REACH; (0, False) elsewhere."""
+    atanh Y = Y + Y^3/3 + Y^5/5 + ... of Y = (b - I)(b + I)^-1, b = F F^T (log b = 2 atanh Y), to 1.4e-7
+    an entry in float32 (its truncation 1.1e-8), where det F > 0 and |Y| <= SERIES_REACH; (0, False)
+    elsewhere."""
     I = wp.identity(n=3, dtype=float)
     b = F * wp.transpose(F)
     Y = (b - I) * wp.inverse(b + I)
@@ -300,18 +302,18 @@ def update_stress(start: int, substep: Step, materials: wp.array(dtype=MaterialP
         else:
             tau = fixed_corotated_kirchhoff(Fp, polar_rotation(Fp), mat.mu, mat.lam)
     elif mat.kind != RIGID:  # rigid: no stress, its particles follow one rigid motion (rigid.py)
-        strain, near = near_rotation_strain(Fp)
+        hencky, near = near_rotation_strain(Fp)
         if near and mat.kind == SNOW:
-            lo, hi = eigenvalue_range(strain)
+            lo, hi = eigenvalue_range(hencky)
             near = lo >= wp.log(1.0 - mat.critical_compression) and hi <= wp.log(1.0 + mat.critical_stretch)
         if near:
             if mat.kind == SNOW or mat.kind == FRACTURE:
-                R = symmetric_exp(-strain) * Fp
+                R = symmetric_exp(-hencky) * Fp
                 if mat.kind == SNOW:  # unclamped: no plastic volume change
                     h = snow_factor(mat, history[p], substep.stiffening)
                     tau = fixed_corotated_kirchhoff(Fp, R, h * mat.mu, h * mat.lam)
                 else:
-                    lo, hi = eigenvalue_range(strain)
+                    _, hi = eigenvalue_range(hencky)
                     damage = wp.max(history[p], wp.clamp((wp.exp(hi) - 1.0 - mat.critical_stretch) / mat.toughness,
                                                          0.0, 1.0))
                     history[p] = damage
@@ -321,16 +323,16 @@ def update_stress(start: int, substep: Step, materials: wp.array(dtype=MaterialP
                         if damage >= 1.0:
                             Fp = R
             else:  # sand, metal, plasticine, foam
-                tr = wp.trace(strain)
-                deviator = strain - (tr / 3.0) * I
+                tr = wp.trace(hencky)
+                deviator = hencky - (tr / 3.0) * I
                 dev_share, volume_share, d_strain = plastic_flow(mat, history[p], substep.dt, tr,
                                                                  wp.sqrt(wp.ddot(deviator, deviator)))
                 history[p] = history[p] + d_strain
                 step = -dev_share * deviator - (volume_share * tr / 3.0) * I
                 if dev_share > 0.0 or volume_share > 0.0:
                     Fp = symmetric_exp(step) * Fp
-                strain = strain + step
-                tau = 2.0 * mat.mu * strain + (mat.lam * wp.trace(strain)) * I
+                hencky = hencky + step
+                tau = 2.0 * mat.mu * hencky + (mat.lam * wp.trace(hencky)) * I
         else:
             U = wp.mat33()
             sig = wp.vec3()
