@@ -213,6 +213,15 @@ def grain_offsets(spacing: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(spacing)[:, None], shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None], 0.0)
 
 
+def inner_pixels(labels: np.ndarray, k: int) -> np.ndarray:
+    """(H, W) bool: the pixels of object k at least EDGE_PX inside its silhouette (eroded by a disc of radius
+    EDGE_PX), or all of its pixels where none lies that far inside (a thin object); labels (H, W) 0
+    background, k + 1 object k (gaussians.h5's mask)."""
+    own = (labels == k + 1).astype(np.uint8)
+    inner = cv2.erode(own, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1)))
+    return (inner if inner.any() else own) > 0
+
+
 def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray,
                      K: np.ndarray, world_to_camera: np.ndarray) -> np.ndarray:
     """(N, 3) in [0, 1]: the photograph's colour where each point projects at rest, read at the nearest
@@ -230,15 +239,12 @@ def rest_ray_colours(rest_positions: np.ndarray, object_id: np.ndarray, photo: n
     col = np.clip(np.floor(uv[:, 0]), 0, W - 1).astype(np.int64)
     row = np.clip(np.floor(uv[:, 1]), 0, H - 1).astype(np.int64)
     colours = np.zeros((len(rest_positions), 3))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1))
     for k in np.unique(object_id):
-        own = (labels == k + 1).astype(np.uint8)
-        inner = cv2.erode(own, disc)
-        source = inner if inner.any() else own
+        source = inner_pixels(labels, k)
         if not source.any():
             continue
         members = object_id == k
-        nearest_row, nearest_col = ndimage.distance_transform_edt(source == 0, return_distances=False,
+        nearest_row, nearest_col = ndimage.distance_transform_edt(~source, return_distances=False,
                                                                   return_indices=True)
         r, c = nearest_row[row[members], col[members]], nearest_col[row[members], col[members]]
         colours[members] = photo[r, c] / 255.0
@@ -271,11 +277,8 @@ def crumb_colours(object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray) 
             (gaussians.h5's mask).
     """
     colours = np.zeros((len(object_id), 3))
-    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * EDGE_PX + 1, 2 * EDGE_PX + 1))
     for k in np.unique(object_id):
-        own = (labels == k + 1).astype(np.uint8)
-        inner = cv2.erode(own, disc)
-        pixels = photo[(inner if inner.any() else own) > 0].astype(np.float64) / 255.0
+        pixels = photo[inner_pixels(labels, k)].astype(np.float64) / 255.0
         if len(pixels) == 0:
             continue
         luma = pixels @ LUMA
