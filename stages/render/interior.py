@@ -292,8 +292,13 @@ def grain_colours(colours: np.ndarray) -> np.ndarray:
     brightest channel reaches 1, so that every grain keeps its colour's hue. A heap of grains of one
     colour, or a torn face, is not one flat colour: each grain's facets catch the light differently."""
     shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(colours)), -2, 2)
-    shade = np.minimum(shade, 1 / np.maximum(colours.max(1), 1e-6))
-    return colours * shade[:, None]
+    return hue_kept(torch.as_tensor(colours), torch.as_tensor(shade)).numpy()
+
+
+def hue_kept(colours: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``colours`` (N, 3) in [0, 1] times ``factor`` (N,), the factor no larger than takes the brightest
+    channel to 1: brightened, a colour keeps its hue where a channel clipped at 1 would turn it."""
+    return colours * torch.minimum(factor, 1 / colours.amax(1).clamp_min(1e-6))[:, None]
 
 
 def grain_relief(colours: np.ndarray) -> np.ndarray:
@@ -341,14 +346,13 @@ def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Te
     grain. Shading 1 + k y (grain_relief, k the relief) averaged over the cap, a disc of radius rho centred
     at height 1 - rho in the grain's disc, is 1 + k (1 - rho); over the rest of the disc it is
     1 - k rho^2 / (1 + rho): over the whole grain 1, so a grain keeps its colour on average. The cap's
-    factor stops where a channel would pass 1, so its hue stays (as grain_colours)."""
+    factor stops where a channel would pass 1, so its hue stays (hue_kept)."""
     lit = torch.nonzero(relief > 0)[:, 0]
     k, grain = relief[lit].to(colours.dtype), covariances[lit]
     up, view, reach_up, reach_view = grain_reach(means[lit], grain, camera)
     cap_means = means[lit] + ((1 - CAP_RADIUS) * reach_up)[:, None] * up - (0.01 * reach_view)[:, None] * view
     body = colours * (1 - relief.to(colours.dtype) * CAP_RADIUS ** 2 / (1 + CAP_RADIUS))[:, None]
-    brighter = torch.minimum(1 + k * (1 - CAP_RADIUS), 1 / colours[lit].amax(1).clamp_min(1e-6))
-    return body, cap_means, CAP_RADIUS ** 2 * grain, opacities[lit], colours[lit] * brighter[:, None]
+    return body, cap_means, CAP_RADIUS ** 2 * grain, opacities[lit], hue_kept(colours[lit], 1 + k * (1 - CAP_RADIUS))
 
 
 def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
@@ -425,7 +429,7 @@ def facets(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tens
     frame), a face is an inlay (:func:`inlays`) FACET_RADIUS of its size, centred in a random direction (seeded
     per particle: the same for every frame and run) at 1 - FACET_RADIUS / 2 of its radius, so that it stands out
     of the outline by half its own, in the grain's colour times 1 + GRAIN_SHADE n (n normal, cut at +-2; capped
-    where a channel would pass 1: the hue kept, as grain_colours)."""
+    where a channel would pass 1: hue_kept)."""
     rng = np.random.default_rng(4)
     shown = faceted > 0
     parts = []
@@ -434,9 +438,8 @@ def facets(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tens
         place *= ((1 - FACET_RADIUS / 2) / np.linalg.norm(place, axis=1))[:, None]
         shade = torch.as_tensor(1 + GRAIN_SHADE * np.clip(rng.standard_normal(len(means)), -2, 2),
                                 dtype=colours.dtype, device=colours.device)[shown]
-        lit = colours[shown] * torch.minimum(shade, 1 / colours[shown].amax(1).clamp_min(1e-6))[:, None]
         parts.append((*inlays(means, covariances, opacities, faceted, np.full(len(means), FACET_RADIUS), place,
-                              0.02 * (face + 1), camera), lit))
+                              0.02 * (face + 1), camera), hue_kept(colours[shown], shade)))
     return tuple(torch.cat(part) for part in zip(*parts))
 
 
