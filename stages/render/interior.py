@@ -124,7 +124,7 @@ HIDING_ROUNDS = 4
 LAYERS_PER_RENDER = 32
 """Depth layers of transmittance per render (channels; transmittance_layers)."""
 REACH_SIGMAS = math.sqrt(2 * math.log(255))
-"""How far a Gaussian of opacity 1 reaches in standard deviations: to alpha 1/255 (splat's cut-off)."""
+"""How far a Gaussian of opacity 1 reaches in standard deviations: to alpha 1/255 (splat's cut-off; 3.3)."""
 
 
 def lattice_spacing(spacing: float, is_gaussian: np.ndarray, object_id: np.ndarray) -> np.ndarray:

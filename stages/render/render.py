@@ -74,7 +74,9 @@ class Particles(NamedTuple):
     object with a lattice), which shows a pore in it once its material flows (interior.pores), else 0;
     narrowing (P,) and fading (P,) the factors on a Gaussian's size and opacity that keep it within a pixel of
     its object's mask once it moves (silhouette.narrowed_to_mask; 1 for the interior); rest_pixels (P, 2)
-    where each particle stands in the frames at rest (output pixels); camera the frames'.
+    where each particle stands in the frames at rest (output pixels); rest_facing (P,) in [0, 1] how squarely
+    each particle faces the camera at rest (facing_towards): a Gaussian turned further towards it than that
+    (silhouette.TURN_TOWARDS) is narrowed less; camera the frames'.
     """
 
     rest_means: torch.Tensor

@@ -26,9 +26,9 @@ from .source_map import to_camera
 SILHOUETTE_TOLERANCE_PX = 1.0
 """Pixels past the mask (photograph's resolution) to which a Gaussian may reach: the silhouette's own pixels
 are split between the object and its background."""
-REACH_SIGMAS = math.sqrt(2 * math.log(10))
-"""A Gaussian's reach, in standard deviations along the way out: where its alpha falls to a tenth of its
-opacity (2.1)."""
+TENTH_SIGMAS = math.sqrt(2 * math.log(10))
+"""Standard deviations out from a Gaussian's centre at which its alpha falls to a tenth of its opacity (2.1):
+how far it may reach past the mask (interior.REACH_SIGMAS is the reach to splat's cut-off, alpha 1/255)."""
 MAX_WINDOW_PX = 16
 """Half the side of the largest window of pixels read around a Gaussian's centre (px)."""
 STILL_PX = 0.5
@@ -66,12 +66,12 @@ def projected_covariances(means: torch.Tensor, covariances: torch.Tensor, camera
 def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: np.ndarray, labels: np.ndarray,
                      camera: splat.Camera) -> tuple[torch.Tensor, torch.Tensor]:
     """(G,) in [0, 1] the factor on each Gaussian's size (its covariance times its square), and (G,) in [0, 1]
-    the factor on its opacity, that keep its alpha at most a tenth of its opacity (REACH_SIGMAS) at every pixel
+    the factor on its opacity, that keep its alpha at most a tenth of its opacity (TENTH_SIGMAS) at every pixel
     centre more than SILHOUETTE_TOLERANCE_PX past its own object's mask (beyond it), at rest in the
     photograph's view, as splat draws it (its projected covariance f^2 S plus the dilation D).
 
     The size factor is the largest f with min over the pixels beyond of d^T (f^2 S + D)^-1 d at least
-    REACH_SIGMAS^2 (bisection; d from its centre). Where the dilation alone reaches further (a Gaussian within
+    TENTH_SIGMAS^2 (bisection; d from its centre). Where the dilation alone reaches further (a Gaussian within
     the tolerance past the mask, whose antialiased dot spills over), f is 0 and the opacity is scaled to a
     tenth there; one whose centre's pixel lies beyond is faded to 0 (tenths stacked along a limb, front and
     back, add up to its alpha). Pixels are read within MAX_WINDOW_PX of the centre. A Gaussian whose centre lies outside the
@@ -98,7 +98,7 @@ def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: 
         members = torch.as_tensor(np.flatnonzero(object_id == k), device=device)
         for chunk in members.split(1024):
             widest = torch.linalg.eigvalsh(S[chunk] + D)[:, 1].clamp_min(0).sqrt()
-            half = min(MAX_WINDOW_PX, int(math.ceil(REACH_SIGMAS * float(widest.max()))) + 1)
+            half = min(MAX_WINDOW_PX, int(math.ceil(TENTH_SIGMAS * float(widest.max()))) + 1)
             steps = torch.arange(-half, half + 1, device=device)
             offsets = torch.stack(torch.meshgrid(steps, steps, indexing="xy"), -1).reshape(-1, 2)
             pixel = uv[chunk].floor().long()[:, None] + offsets[None]  # (n, k, 2) col, row
@@ -115,10 +115,10 @@ def narrowed_to_mask(means: torch.Tensor, covariances: torch.Tensor, object_id: 
 
             low = torch.zeros(len(chunk), dtype=dtype, device=device)
             high = torch.ones(len(chunk), dtype=dtype, device=device)
-            fits = nearest(high) >= REACH_SIGMAS ** 2
+            fits = nearest(high) >= TENTH_SIGMAS ** 2
             for _ in range(BISECTIONS):
                 middle = (low + high) / 2
-                ok = nearest(middle) >= REACH_SIGMAS ** 2
+                ok = nearest(middle) >= TENTH_SIGMAS ** 2
                 low, high = torch.where(ok, middle, low), torch.where(ok, high, middle)
             size[chunk] = torch.where(fits, 1.0, low)
             # alpha at the nearest pixel beyond of the dilation's dot alone, over the opacity

@@ -8,7 +8,7 @@ import torch
 import splat
 from schemas.artifacts import TrajectoriesArtifact
 from stages.render.render import render_video
-from stages.render.silhouette import REACH_SIGMAS, SILHOUETTE_TOLERANCE_PX, narrowed_to_mask
+from stages.render.silhouette import SILHOUETTE_TOLERANCE_PX, TENTH_SIGMAS, narrowed_to_mask
 
 from .test_enhance_silhouette import H, W, fringed_gaussians
 from .test_render_flow import turned_sphere
@@ -19,7 +19,7 @@ def test_a_narrowed_gaussian_stays_within_a_pixel_of_the_mask():
     narrowing, each one's alpha over its opacity as splat draws it, o' exp(-d^T (f^2 S + 0.3 I)^-1 d / 2) (S its
     projected covariance, from its own pinhole derivative, o' its opacity factor), at every pixel centre more
     than SILHOUETTE_TOLERANCE_PX past the disc's edge (half a pixel more from its pixels' centres) is at most a
-    tenth (REACH_SIGMAS), and within 2 % of a tenth where it was narrowed (no narrower than needed), unless its
+    tenth (TENTH_SIGMAS), and within 2 % of a tenth where it was narrowed (no narrower than needed), unless its
     centre's own pixel lies beyond (then its opacity is 0); many keep their size exactly, many are narrowed,
     none grows."""
     size, focal = 80, 100.0
@@ -41,7 +41,7 @@ def test_a_narrowed_gaussian_stays_within_a_pixel_of_the_mask():
     assert (factor <= 1).all() and (factor >= 0).all() and (fade <= 1).all() and (fade >= 0).all()
     beyond = cv2.distanceTransform((~disc).astype(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE) > (
         SILHOUETTE_TOLERANCE_PX + 0.5)
-    tenth = np.exp(-REACH_SIGMAS ** 2 / 2)
+    tenth = np.exp(-TENTH_SIGMAS ** 2 / 2)
     points = np.stack([cols, rows], -1)
     for m, C, f, o in zip(means, covariances, factor, fade):
         x, y, z = m
