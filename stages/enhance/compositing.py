@@ -81,7 +81,7 @@ def normalised_blur(values: np.ndarray, valid: np.ndarray, sigma_px: float) -> t
 
 STILL_PX = 0.5
 """Motion (output pixels) of the object's surface at which the photograph's own pixels beside it
-fade out of the background: one pixel of motion leaves e^-4 of them."""
+fade out of the background: one pixel of motion leaves e^-4 of them. Twin of stages/render/silhouette.py's."""
 
 
 def standing_still(source_uv: np.ndarray) -> np.ndarray:
