@@ -33,7 +33,8 @@ MAX_WINDOW_PX = 16
 """Half the side of the largest window of pixels read around a Gaussian's centre (px)."""
 STILL_PX = 0.5
 """How far (output px) a Gaussian's picture moves from where it stood at rest over which it is narrowed:
-1 - exp(-(m / STILL_PX)^2), as pm-enhance judges a pixel to stand still (compositing.standing_still)."""
+1 - exp(-(m / STILL_PX)^2), as pm-enhance judges a pixel to stand still (compositing.standing_still): the twin
+of stages/enhance/compositing.py's STILL_PX, kept equal to it (a stage imports no other)."""
 TURN_TOWARDS = 0.25
 """How much more squarely than at rest (|n . d|, n its surface normal, d the ray to it) a moved Gaussian may
 face the camera and still be narrowed (render.Particles.at: by exp(-(excess / TURN_TOWARDS)^2)). Turned
