@@ -210,7 +210,7 @@ def grain_offsets(spacing: np.ndarray) -> np.ndarray:
         spacing: (P,) m (lattice_spacing).
     """
     shift = np.random.default_rng(2).uniform(-0.5, 0.5, (len(spacing), 3))
-    return np.where(np.isfinite(spacing)[:, None], shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None], 0.0)
+    return shift * np.where(np.isfinite(spacing), spacing, 0.0)[:, None]
 
 
 def inner_pixels(labels: np.ndarray, k: int) -> np.ndarray:

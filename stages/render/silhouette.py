@@ -7,7 +7,7 @@ At rest pm-enhance shows the photograph there, but once the object moves that fr
 band in the colour the source map reads beyond the mask. :func:`narrowed_to_mask` finds how far to shrink
 each Gaussian that reaches past its object's mask, at rest in the photograph's view, so that it reaches no
 further than SILHOUETTE_TOLERANCE_PX past it (its alpha there a tenth of its opacity at most; splat's own
-dilation of 0.3 px^2 comes on top). The render narrows a Gaussian so as it moves (render.Particles.at): at
+dilation of 0.3 px^2 comes on top). The render narrows a Gaussian as it moves (render.Particles.at): at
 rest it draws the silhouette's pixels it was fitted to, and the coarse frame 0 stays the reconstruction's.
 """
 from __future__ import annotations
