@@ -13,9 +13,9 @@ from stages.enhance.unseen import Albedo, Continuation
 def test_a_source_across_the_border_reads_the_border_s_colour_at_gain_one():
     """Sources from 2 px inside the lower border to 1.5 px beyond it, surface as lit as at rest and unmoved
     in facing: the colour read is the photograph's (linear, within 1e-4) wherever the source is on it, and
-    its part of the object fades to 0 beyond it. Read with the border's zeros, the shading a source had
-    fell towards 0 beyond it and its gain rose towards MAX_GAIN: 0.45 off (pale outlines along the cat's
-    cut base, benchmarks/scenes/cat, where its sources cross the photograph's lower border)."""
+    its part of the object fades to 0 beyond it. Read with the border's zeros, a source's shading falls
+    towards 0 beyond it and its gain rises towards MAX_GAIN: 0.45 off (pale outlines along the cat's cut
+    base, benchmarks/scenes/cat, where its sources cross the photograph's lower border)."""
     height, width = 24, 32
     colour = np.array([200.0, 150.0, 120.0], np.float32)
     photo = np.broadcast_to(colour, (height, width, 3)).astype(np.float32)

@@ -76,7 +76,7 @@ def test_a_moved_object_carries_no_fringe():
     """A ray-cast capsule whose Gaussians reach 2 px past its mask (test_enhance_silhouette), moved 5 px
     right: more than SILHOUETTE_TOLERANCE_PX + 1 px beyond the moved mask the render's alpha is under 1/2, and
     from half a pixel further under a tenth (the Gaussians' tenths at the tolerance, stacked and antialiased),
-    where the fringe drew it at 0.77 and 0.62; the moved mask itself stays covered (alpha above 0.99 on all but
+    where an unnarrowed fringe draws it at 0.77 and 0.62; the moved mask itself stays covered (alpha above 0.99 on all but
     its outline's pixels). At rest (frame 0) the Gaussians are drawn as fitted, the fringe included: pm-enhance
     shows the photograph there."""
     gaussians, mask = fringed_gaussians()
