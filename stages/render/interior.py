@@ -5,7 +5,7 @@ surface Gaussians (trajectories.h5, ``is_gaussian`` false). Each is rendered as
 a Gaussian of its own (as PhysGaussian renders its filled particles):
 
 - colour: the surface's in front of it at rest, the Gaussians' render on its rest ray
-  (:func:`fitted_photograph`, :func:`rest_ray_colours`), a brittle solid's crumb (:func:`crumb_colours`);
+  (:func:`fitted_photograph`, :func:`rest_ray_colours`), a porous solid's crumb (:func:`crumb_colours`);
   its rest normal is that of the surface it lies under, the nearest opaque Gaussian of its object at rest
   (:func:`surface_under`);
 - opacity: :data:`INTERIOR_OPACITY`, solid material;
@@ -18,7 +18,7 @@ spacing (:func:`grain_shapes`): a solid's round and on its lattice; sand's and s
 elongated and turned at random, each moved off its lattice site by a random fraction of the cell
 (:func:`grain_offsets`: a heap shows no lattice). A grain takes the photograph's colour where its rest
 position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it
-belongs to, so a heap shows both); a brittle solid's interior, the crumbs of its torn face, the colour of its
+belongs to, so a heap shows both); a porous solid's interior, the crumbs of its torn face, the colour of its
 object's lit half (:func:`crumb_colours`), with pores (:func:`pores`). A grain of sand is a little brighter or
 darker at the same hue (:func:`grain_colours`), with two faces (:func:`facets`), lit
 from above: a brighter cap over a darker body, by its colour's albedo (:func:`grain_relief`,

@@ -58,11 +58,11 @@ class Particles(NamedTuple):
     drawn from its particle (interior.grain_offsets); grain_covariances (P, 3, 3), m^2,
     grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
     its material flows (interior.Mixing): a hard grain of the lattice's size, in the photograph's colour on
-    its rest ray, a brittle solid's interior in its crumb's, shaded (interior.grain_shapes,
+    its rest ray, a porous solid's interior in its crumb's, shaded (interior.grain_shapes,
     grain_colours; its rest covariance, opacity and colour where its object has no lattice);
     opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
     (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
-    at rest (a fill particle: the surface's in front of it at rest, interior.fitted_photograph, or a brittle
+    at rest (a fill particle: the surface's in front of it at rest, interior.fitted_photograph, or a porous
     solid's crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
@@ -70,7 +70,7 @@ class Particles(NamedTuple):
     (interior.grain_relief; 0 for the other materials); grains (P,) 1 for a particle of an object with a
     lattice, a hard grain once its material flows (interior.undilated), else 0; granular (P,) 1 for a grain
     of sand or snow (of an object with a lattice), which shows a shadowed crevice under it once its material
-    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a brittle solid (interior.POROUS, of an
+    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a porous solid (interior.POROUS, of an
     object with a lattice), which shows a pore in it once its material flows (interior.pores), else 0;
     narrowing (P,) and fading (P,) the factors on a Gaussian's size and opacity that keep it within a pixel of
     its object's mask once it moves (silhouette.narrowed_to_mask; 1 for the interior); rest_pixels (P, 2)
@@ -178,8 +178,9 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     on_rest_ray = t(rest_ray_colours(trajectories.rest_positions.astype(np.float64), trajectories.object_id,
                                      gaussians.photo, gaussians.mask, gaussians.K,
                                      gaussians.world_to_camera)).to(colors.dtype)
-    # broken brittle material shows its crumb; any other interior the colour of the surface in front of it, as
-    # the fit draws it: the photograph on its ray may hold a highlight's single pixel, which the fit averages away
+    # broken porous material (fracture, foam) shows its crumb; any other interior the colour of the surface in
+    # front of it, as the fit draws it: the photograph on its ray may hold a highlight's single pixel, which the
+    # fit averages away
     crumb = t(crumb_colours(trajectories.object_id[fill], gaussians.photo, gaussians.mask)).to(colors.dtype)
     fitted = fitted_photograph(means, covariances, opacities, colors, full_camera(gaussians))
     in_front = t(rest_ray_colours(trajectories.rest_positions[fill].astype(np.float64), trajectories.object_id[fill],
