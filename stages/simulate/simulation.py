@@ -429,27 +429,33 @@ class Simulation:
             if asleep:
                 log.info("frame %d/%d: a condition acts, the simulation goes on", f, T - 1)
                 asleep = False
-            dt = self.substep_size(float(diag["max_speed"][f - 1]), times[f - 1], times[f])
-            n = max(1, math.ceil((times[f] - t) / dt - 1e-9))
-            h = (times[f] - t) / n
-            if n > self.physics.max_substeps_per_frame:
-                raise InputError(self.scene_file, "physics.max_substeps_per_frame",
-                                 f"frame {f} would take {n} substeps: particles reached "
-                                 f"{diag['max_speed'][f - 1]:.3g} m/s", "soften the conditions or the impact, "
-                                 "or raise physics.max_substeps_per_frame if you mean it")
-            every = self._follow_every(float(diag["max_speed"][f - 1]), h)
-            i = 0
+            speed = float(diag["max_speed"][f - 1])
+
+            def split(done: int, t: float) -> tuple[int, float, int]:
+                """(frame f's substeps, `done` of them taken by t s; the length in s of those left; substeps
+                between grid moves at that length). A frame of more than physics.max_substeps_per_frame
+                is refused."""
+                left = max(1, math.ceil((times[f] - t) / self.substep_size(speed, times[f - 1], times[f]) - 1e-9))
+                if done + left > self.physics.max_substeps_per_frame:
+                    raise InputError(self.scene_file, "physics.max_substeps_per_frame",
+                                     f"frame {f} would take {done + left} substeps: particles reached {speed:.3g} "
+                                     "m/s", "soften the conditions or the impact, or raise "
+                                     "physics.max_substeps_per_frame if you mean it")
+                h = (times[f] - t) / left
+                return done + left, h, self._follow_every(speed, h)
+
+            n, h, every = split(0, t)
+            i, unmoved = 0, every  # unmoved: substeps since the grid last moved
             while i < n:
-                if i % every == 0:
+                if unmoved >= every:
                     self.solver.follow(FOLLOW_MARGIN_CELLS)
+                    unmoved = 0
                 self.conditions.before_substep(t, self.solver)
                 self.solver.substep(h)
                 t += h
-                i += 1
+                i, unmoved = i + 1, unmoved + 1
                 if self.solver.hardening_followed and i < n:  # the rest of the frame at the snow's stiffness now
-                    left = max(1, math.ceil((times[f] - t) / self.substep_size(
-                        float(diag["max_speed"][f - 1]), times[f - 1], times[f]) - 1e-9))
-                    n, h = i + left, (times[f] - t) / left
+                    n, h, every = split(i, t)
             t = times[f]
             diag["substeps"][f] = n
             self._record(f, positions, F, diag)

@@ -149,6 +149,27 @@ def test_snow_steps_at_the_wave_speed_of_the_hardening_it_has(plastic_volume, ha
     assert fixed._cfl_substep(0.0) == pytest.approx(0.4 * fixed.grid.dx / (clamp + 9.81 / 20), rel=1e-6)
 
 
+def test_a_frame_re_split_past_max_substeps_per_frame_is_refused():
+    """A snow frame re-splits its rest after every substep (its substep follows its hardening); where the
+    re-split substep shrinks tenfold, the frame's count passes physics.max_substeps_per_frame, set at twice
+    the first split's, and the run is refused naming that field (frame 1)."""
+    means, oid = boxes(((0, 0, 0.5), (0.1, 0.1, 0.6)), spacing=0.01)
+    sim = Simulation(PhysicsConfig(grid=16, fps=20, duration_s=0.1), [M.Snow()], means, oid)
+    assert sim.solver.hardening_followed
+    real, calls = sim.substep_size, []
+
+    def shrinking(*args):
+        calls.append(args)
+        return real(*args) / (1 if len(calls) == 1 else 10)
+
+    first = math.ceil(1 / 20 / real(0.0, 0.0, 1 / 20) - 1e-9)
+    sim.physics.max_substeps_per_frame = 2 * first
+    sim.substep_size = shrinking
+    with pytest.raises(InputError, match="max_substeps_per_frame") as refusal:
+        sim.run()
+    assert "frame 1 " in str(refusal.value) and len(calls) >= 2
+
+
 def test_snow_thrown_down_compacts_as_at_the_clamp_s_substep():
     """A 10 cm snow box thrown down at 2 m/s onto friction ground compacts (J_p falls) and stops; stepped at
     the hardening it has, it ends as it does at the substep of the clamp's fivefold stiffness (a physics.dt
