@@ -47,7 +47,8 @@ from schemas.artifacts import CoarseArtifact, GaussiansArtifact, TrajectoriesArt
 from schemas.materials import PRESETS  # noqa: E402
 from schemas.video import read_video  # noqa: E402
 from stages.enhance import flow  # noqa: E402
-from stages.enhance.compositing import blend_over_background, resize_to, unpremultiply  # noqa: E402
+from stages.enhance.compositing import (blend_over_background, resize_to, standing_still,  # noqa: E402
+                                         unpremultiply)
 from stages.reconstruct.metrics import iou, masked_psnr, median_relative_error  # noqa: E402
 from stages.reconstruct.optimize import Settings  # noqa: E402
 from stages.reconstruct.pipeline import optimize_scene, prepare  # noqa: E402
@@ -431,7 +432,7 @@ def shadow_section(args) -> list[list]:
         relighting = Relighting.fit(coarse, resize_to(gaussians.photo, coarse.width, coarse.height))
         shadows = Shadows.fit(coarse, gaussians, relighting.shading.light if relighting is not None else None,
                               MirrorPlanes.of(gaussians))
-        darkening = shadows(1, coarse.width / gaussians.width)
+        darkening = shadows(1, standing_still(coarse.source_uv[1] * coarse.width / gaussians.width))
         free = cv2.dilate((coarse.alpha[1] > 0.01).astype(np.uint8), np.ones((5, 5), np.uint8)) == 0
         old = free & (shadows.photographed > 0.15)
         left = f"{100 * darkening[old].mean() / shadows.photographed[old].mean():.0f} %" if old.sum() > 20 else "no shadow"

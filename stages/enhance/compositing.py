@@ -120,17 +120,17 @@ class Backdrop:
         self.reach_px = float(max(1.0, reach.max())) if ring.any() else 1.0
         self.near_rest = cv2.GaussianBlur(alpha_rest.astype(np.float32), (0, 0), self.reach_px)
 
-    def __call__(self, alpha: np.ndarray, source_uv: np.ndarray, shadow: np.ndarray | None = None) -> np.ndarray:
+    def __call__(self, alpha: np.ndarray, still: np.ndarray, shadow: np.ndarray | None = None) -> np.ndarray:
         """(h, w, 3) float32 in [0, 255], the background of a frame.
 
         Args:
             alpha: (h, w) the frame's rendered alpha.
-            source_uv: (h, w, 2) its source map at output resolution, as rendered (unsmoothed:
-                smoothing pulls it inwards by a fraction of a pixel at the silhouette); NaN off the object.
+            still: (h, w) standing_still of its source map at output resolution, as rendered (unsmoothed:
+                smoothing pulls it inwards by a fraction of a pixel at the silhouette).
             shadow: (h, w) in [0, 1], how much the objects' shadows darken the fill (shadow.Shadows),
                 or None. The photograph beside an object that still stands shows its own.
         """
-        near_now = cv2.GaussianBlur((alpha * standing_still(source_uv)).astype(np.float32), (0, 0), self.reach_px)
+        near_now = cv2.GaussianBlur((alpha * still).astype(np.float32), (0, 0), self.reach_px)
         beside = np.clip(near_now / np.maximum(self.near_rest, 1e-3), 0.0, 1.0) * (self.near_rest > 1e-3)
         fill = self.fill if shadow is None else self.fill * (1 - shadow[..., None])
         return fill + (beside * self.outside)[..., None] * (self.photo - fill)

@@ -112,7 +112,7 @@ def objects_reader(photo: np.ndarray, on_objects: np.ndarray) -> Callable[[np.nd
     return read
 
 
-def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
+def source_on_objects(touched: np.ndarray, uv: np.ndarray, still: np.ndarray) -> np.ndarray:
     """(h, w) float32 in [0, 1]: the share of each pixel's alpha that shows the objects.
 
     The reconstruction's Gaussians along the silhouette reach past the objects' mask (on the examples the
@@ -127,8 +127,9 @@ def source_on_objects(touched: np.ndarray, uv: np.ndarray) -> np.ndarray:
         touched: (h, w) bool, the output pixels the photograph's objects cover at least in part.
         uv: (h, w, 2) the frame's source points as rendered (unsmoothed: at rest exactly each pixel's
             centre), NaN where there is no surface.
+        still: (h, w) standing_still(uv).
     """
-    return (1 - standing_still(uv) * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
+    return (1 - still * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
 
 
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
@@ -180,6 +181,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
     objects_share = resize_to((gaussians.mask > 0).astype(np.float32), w, h)
+    touched = objects_share > 0
     read_objects = objects_reader(photo, objects_share > 0.5)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
     coverage = object_coverage(gaussians.mask, w, h)
@@ -191,6 +193,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     frames = np.empty((T, h, w, 3), np.uint8)
     for t in range(T):
         rendered_uv = coarse.source_uv[t] * scale
+        still = standing_still(rendered_uv)
         uv = smooth_source(rendered_uv)
         seen = seen_fraction(coarse.source_confidence[t], coarse.source_coherence[t])
         rendered = unpremultiply(coarse.rgb[t], coarse.alpha[t])
@@ -201,8 +204,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
             trusted = np.maximum(trusted, surface)
         weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
-        background = backdrop(coarse.alpha[t], rendered_uv, shadows(t, scale) if ground else None)
-        alpha = coarse.alpha[t] * source_on_objects(objects_share > 0, rendered_uv)
+        background = backdrop(coarse.alpha[t], still, shadows(t, still) if ground else None)
+        alpha = coarse.alpha[t] * source_on_objects(touched, rendered_uv, still)
         frames[t] = blend_over_background(colour, alpha, background)
         on = coarse.alpha[t] > 0.5
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph, %.0f%% of them continuing "

@@ -25,7 +25,7 @@ import numpy as np
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact
 from schemas.camera import pixel_rays
 
-from .compositing import resize_to, standing_still
+from .compositing import resize_to
 from .unseen import MirrorPlanes, rest_in_camera
 
 log = logging.getLogger("physmotion.enhance.shadow")
@@ -181,14 +181,13 @@ class Shadows:
         samples = [front + ray * (depth * s / (SAMPLES_THROUGH - 1))[:, None] for s in range(SAMPLES_THROUGH)]
         return cast_footprint(np.concatenate(samples), self.light, self.ground, self.coarse.K, h, w), along
 
-    def __call__(self, t: int, source_scale: float) -> np.ndarray:
+    def __call__(self, t: int, staying: np.ndarray) -> np.ndarray:
         """(h, w) float32: how much frame t's background is darkened by the objects' shadows.
 
         Args:
-            source_scale: output pixels per photograph pixel (source_uv is in the photograph's).
+            staying: (h, w) compositing.standing_still of frame t's source map at output resolution.
         """
         # how much of the objects stands where it stood in the photograph
-        staying = standing_still(self.coarse.source_uv[t] * source_scale)
         still = float(np.clip((self.coarse.alpha[t] * staying).sum() / max(self.coarse.alpha[0].sum(), 1e-6), 0, 1))
         footprint, _ = self.footprint(t, self.rest_along)
         cast = self.strength * cv2.GaussianBlur(footprint, (0, 0), max(0.5, self.softness_px))

@@ -20,7 +20,7 @@ from schemas import InputError
 from schemas.artifacts import CoarseArtifact, GaussiansArtifact, LatentsArtifact, scheduler_json
 from schemas.diffusion import DiffusionSettings
 
-from ..compositing import Backdrop, blend_over_background, resize_to, unpremultiply
+from ..compositing import Backdrop, blend_over_background, resize_to, standing_still, unpremultiply
 from .components import Components
 from .conditioning import canny_control, inverse_depth_control, model_size, to_tensor, to_u8
 from .inversion import inverse_scheduler, invert_video, stored_timesteps
@@ -48,7 +48,8 @@ def video_inputs(coarse: CoarseArtifact, gaussians: GaussiansArtifact, settings:
     backdrop = Backdrop(resize_to(gaussians.photo, w, h), resize_to(gaussians.background, w, h), gaussians.mask,
                         coarse.alpha[0])
     scale = w / gaussians.width  # photograph pixels -> output pixels
-    blended = np.stack([blend_over_background(unpremultiply(rgb, alpha), alpha, backdrop(alpha, uv * scale))
+    blended = np.stack([blend_over_background(unpremultiply(rgb, alpha), alpha,
+                                              backdrop(alpha, standing_still(uv * scale)))
                         for rgb, alpha, uv in zip(coarse.rgb, coarse.alpha, coarse.source_uv)])
     height, width = model_size(h, w, settings.resolution)
     blended = np.stack([resize_to(f, width, height) for f in blended])
