@@ -78,6 +78,9 @@ GRAIN_OPACITY = 50.0
 a flat-topped disc): a grain is an opaque solid with a hard edge, and at 50 its alpha falls from 0.9 to 0.1
 over a quarter of its radius (the edge antialiased), where a Gaussian of opacity 1 takes over 1.4 radii
 and a heap of them reads as a blur of one colour."""
+GRAIN_EDGE_SIGMAS = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
+"""A hard grain's alpha-1/2 radius in standard deviations: opacity exp(-r^2 / 2 sigma^2) = 1/2 at
+r = sigma sqrt(2 ln(2 GRAIN_OPACITY))."""
 GRAIN_SHADE = 0.13
 """Spread (standard deviation) of the grains' brightness relative to their colour: measured on
 scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
@@ -188,7 +191,7 @@ def grain_shapes(spacing: np.ndarray, granular: np.ndarray) -> tuple[np.ndarray,
     # alpha 1/2 where opacity exp(-r^2 / 2 sigma^2) = 1/2: r = sigma sqrt(2 ln(2 opacity))
     half_alpha_radius = (GRAIN_SIGMA * math.sqrt(2 * math.log(2)) * sizes
                          * np.where(np.isfinite(spacing), spacing, 0.0))
-    hard_sigma = half_alpha_radius / math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
+    hard_sigma = half_alpha_radius / GRAIN_EDGE_SIGMAS
     elongation = np.where(granular, GRAIN_ELONGATION, 1.0)[:, None]
     axes = elongation ** np.array([2 / 3, -1 / 3, -1 / 3])  # product 1: the round grain's volume
     turns = Rotation.random(len(spacing), random_state=0).as_matrix()
@@ -325,10 +328,9 @@ def grain_reach(means: torch.Tensor, covariances: torch.Tensor, camera: splat.Ca
     eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
     view = means - eye
     view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
-    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # a hard grain's alpha-1/2 radius in standard deviations
 
     def reach(d: torch.Tensor) -> torch.Tensor:
-        return edge * torch.einsum("pi,pij,pj->p", d, covariances, d).clamp_min(0).sqrt()
+        return GRAIN_EDGE_SIGMAS * torch.einsum("pi,pij,pj->p", d, covariances, d).clamp_min(0).sqrt()
 
     return up, view, reach(up.expand_as(view)), reach(view)
 
@@ -389,10 +391,10 @@ def inlays(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tens
     grain = covariances[shown]
     scale = torch.as_tensor(size, dtype=grain.dtype, device=grain.device)[shown]
     _, view, _, reach_view = grain_reach(means[shown], grain, camera)
-    edge = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))  # the half-alpha radius in standard deviations
     root = torch.linalg.cholesky(grain + 1e-18 * torch.eye(3, dtype=grain.dtype, device=grain.device))
     at = torch.as_tensor(place, dtype=grain.dtype, device=grain.device)[shown]
-    inlay_means = means[shown] + edge * (root @ at[:, :, None])[..., 0] - (nearer * reach_view)[:, None] * view
+    inlay_means = (means[shown] + GRAIN_EDGE_SIGMAS * (root @ at[:, :, None])[..., 0]
+                   - (nearer * reach_view)[:, None] * view)
     return inlay_means, scale[:, None, None] ** 2 * grain, opacities[shown] * weight[shown].to(opacities.dtype)
 
 
