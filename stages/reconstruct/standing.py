@@ -459,9 +459,11 @@ def overlap(view: GravityView, image: np.ndarray) -> tuple[float, np.ndarray]:
     twinned = mirrored_pieces(image, pieces)
     handles = np.zeros_like(mask)
     for k, piece in enumerate(ndimage.find_objects(pieces), start=1):
+        if k in twinned:
+            continue
         part = pieces[piece] == k
         thickness = ndimage.distance_transform_edt(np.pad(part, 1))[1:-1, 1:-1].max()
-        if k not in twinned and thickness <= HANDLE_THICKNESS * own:
+        if thickness <= HANDLE_THICKNESS * own:
             handles[piece] |= part
     target = mask & ~handles
     return float(np.sum(image & target) / max(np.sum(image | target), 1)), target
