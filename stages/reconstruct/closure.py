@@ -179,6 +179,7 @@ def disc_cover_scale(mask: np.ndarray, axis_r: np.ndarray, axis_c: np.ndarray, r
     ball 20 px across comes out 12 % light."""
     centres, at = np.unique(np.stack([axis_r[mask], axis_c[mask]], axis=1), axis=0, return_index=True)
     radii = radius[mask][at]
+    centres, radii = centres[radii > 0], radii[radii > 0]  # a disc of radius 0 covers nothing (and divides by it)
     rows, cols = np.nonzero(ndimage.binary_dilation(mask, iterations=3))
     # each pixel's depth inside its deepest disc, over its radius
     reach = np.full(len(rows), -np.inf)
