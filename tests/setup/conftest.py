@@ -2,14 +2,12 @@
 import re
 import shutil
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-BIN = Path(sys.executable).parent
-REPO = Path(__file__).resolve().parents[2]
+from testing.workflow import BIN, REPO
 
 
 class Server:
