@@ -126,6 +126,12 @@ def shown_pixels(params: _Parameters, camera: splat.Camera) -> torch.Tensor:
     return weight
 
 
+def gradient_mask(free: np.ndarray, device: str) -> torch.Tensor:
+    """(G,1) float32 on ``device``: 1 for the Gaussians whose parameter is optimised (free (G,) bool), 0 for
+    the held ones, to multiply that parameter's gradient by."""
+    return torch.tensor(free, device=device)[:, None].float()
+
+
 def optimize(initial: Gaussians, views: list[View], settings: Settings, device: str = "cpu",
              seed: int = 0, held: Optional[np.ndarray] = None) -> tuple[Gaussians, np.ndarray]:
     """Optimise ``initial`` against ``views`` (views[0] the input view, with colour).
@@ -150,10 +156,9 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
     history = np.full((settings.iterations, len(LOSS_TERMS)), np.nan, np.float32)
     started = time.perf_counter()
     input_view = views[0]
-    free = None if held is None else torch.tensor(~held, device=device)[:, None].float()
     if held is not None:
         shown = shown_pixels(params, input_view.camera).cpu().numpy() >= SHOWN_PX
-        colour_free = torch.tensor(~held | shown, device=device)[:, None].float()
+        means_free, colour_free = gradient_mask(~held, device), gradient_mask(~held | shown, device)
     for it in range(settings.iterations):
         if it == settings.decay_at:
             for group in optimizer.param_groups:
@@ -170,8 +175,8 @@ def optimize(initial: Gaussians, views: list[View], settings: Settings, device: 
             total = total + settings.hard_depth_weight * hard
         optimizer.zero_grad(set_to_none=True)
         total.backward()
-        if free is not None:  # a zero gradient from the start leaves Adam's moments, and so the step, at zero
-            params.means.grad *= free
+        if held is not None:  # a zero gradient from the start leaves Adam's moments, and so the step, at zero
+            params.means.grad *= means_free
             params.colors.grad *= colour_free
         optimizer.step()
         with torch.no_grad():
