@@ -375,16 +375,16 @@ def update_stress(start: int, substep: Step, materials: wp.array(dtype=MaterialP
 @wp.func
 def elastic_energy_density(mat: MaterialParams, F: wp.mat33, history: float):
     """Stored elastic energy per unit rest volume, J/m^3, of an elastic deformation gradient."""
-    U = wp.mat33()
-    sig = wp.vec3()
-    V = wp.mat33()
-    wp.svd3(F, U, sig, V)
     if mat.kind == RIGID:
         return 0.0
     if mat.kind == JELLY and mat.neo_hookean == 1:
         J = wp.max(wp.determinant(F), MIN_STRETCH * MIN_STRETCH * MIN_STRETCH)
         logJ = wp.log(J)
         return 0.5 * mat.mu * (wp.ddot(F, F) - 3.0) - mat.mu * logJ + 0.5 * mat.lam * logJ * logJ
+    U = wp.mat33()
+    sig = wp.vec3()
+    V = wp.mat33()
+    wp.svd3(F, U, sig, V)
     if mat.kind == JELLY or mat.kind == SNOW or mat.kind == FRACTURE:
         scale = 1.0
         if mat.kind == SNOW:
@@ -415,3 +415,12 @@ def elastic_energy(
     """Stored elastic energy V_p Psi(F_p) of each particle, J."""
     p = wp.tid()
     energy[p] = volume[p] * elastic_energy_density(materials[object_id[p]], F[p], history[p])
+
+
+@wp.kernel
+def deformation_since_rest(F: wp.array(dtype=wp.mat33), rest_F_inverse: wp.array(dtype=wp.mat33), Q: wp.mat33,
+                           world_F: wp.array(dtype=wp.mat33)):
+    """Each particle's deformation since the photograph in the world frame, Q^T F_p F_rest,p^-1 Q, where
+    F_rest,p is its F in the settled rest state and Q (3,3) turns world vectors into the simulation frame."""
+    p = wp.tid()
+    world_F[p] = wp.transpose(Q) @ F[p] @ rest_F_inverse[p] @ Q

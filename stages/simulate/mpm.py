@@ -143,6 +143,14 @@ def stencil_node_box(particles: Particles, grid: GridNodes, corners: wp.array(dt
         wp.atomic_max(corners, 3 + a, base[a])
 
 
+@wp.kernel
+def smallest_history(object_id: wp.array(dtype=wp.int32), history: wp.array(dtype=float),
+                     smallest: wp.array(dtype=float)):
+    """Each object's smallest history scalar (smallest[k], for snow its most compacted J_p)."""
+    p = wp.tid()
+    wp.atomic_min(smallest, object_id[p], history[p])
+
+
 @wp.func
 def wall_slip(v: wp.vec3, node: wp.vec3i, shape: wp.vec3i):
     """Stop the velocity component that points out of the domain in the wall layer."""
@@ -465,9 +473,9 @@ class MPMSolver:
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
-        # per snow object (its material, its particles), where the substep follows its hardening
-        self._snow = [(m, np.flatnonzero(np.asarray(object_id) == k)) for k, m in enumerate(materials)
-                      if m.preset == "snow"] if follow_hardening else []
+        # per snow object (its index, its material), where the substep follows its hardening
+        self._snow = [(k, m) for k, m in enumerate(materials) if m.preset == "snow"] if follow_hardening else []
+        self._smallest_history = wp.empty(len(materials), dtype=float, device=device)
         self.stiffening = SNOW_HARDENING_MAX
         self.rigid = None
         self._pinned = None  # pin(): where substeps leave the particles
@@ -583,8 +591,11 @@ class MPMSolver:
         """Set `stiffening` to SNOW_HARDENING_GROWTH times the snow particles' largest hardening factor."""
         if not self._snow:
             return
-        history = self.history.numpy()
-        largest = max(float(snow_hardening(m, history[members].min())) for m, members in self._snow)
+        self._smallest_history.fill_(np.inf)
+        wp.launch(smallest_history, dim=self.n_particles, device=self.device,
+                  inputs=[self.object_id, self.history, self._smallest_history])
+        smallest = self._smallest_history.numpy()  # one value per object: no copy of the particles' histories
+        largest = max(float(snow_hardening(m, smallest[k])) for k, m in self._snow)
         self.stiffening = min(SNOW_HARDENING_MAX, SNOW_HARDENING_GROWTH * largest)
 
     def hold_yield(self, held: bool) -> None:
@@ -642,7 +653,8 @@ class MPMSolver:
         dx, shape = self.grid.dx, np.asarray(self.grid.shape)
         origin = np.asarray(self.grid.origin)
         inner = BOUNDARY_NODES + margin  # cells from a face to the nearest allowed particle
-        lo, hi = x.min(axis=0), x.max(axis=0)
+        along_axes = np.ascontiguousarray(x.T)  # (3, P): numpy reduces a (P, 3) array over P ten times slower
+        lo, hi = along_axes.min(axis=1), along_axes.max(axis=1)
         fits = (hi - lo) <= (shape - 1 - 2 * inner) * dx
         low_shift = np.floor((lo - origin) / dx - inner)  # cells the grid may move up and keep lo inside
         high_shift = np.ceil((hi - origin) / dx - (shape - 1 - inner))  # cells it must move to hold hi

@@ -26,7 +26,7 @@ from schemas.materials import PRESETS
 
 from . import domain, rest_state
 from .conditions import Conditions, inertia_about_centre, largest_acceleration
-from .constitutive import elastic_energy, wave_speed
+from .constitutive import deformation_since_rest, elastic_energy, wave_speed
 from .fill import fill_object, fill_solid, lattice_spacing
 from .mpm import GROUND_NONE, GROUND_TYPES, Ground, MPMSolver
 from .quasi_static import RELAXED, QuasiStatic
@@ -144,7 +144,10 @@ class Simulation:
         self._energy = wp.zeros(len(self.masses), dtype=float, device=device)
         self._free_logged = self._outside_logged = 0
         self._camera = None if silhouette is None else (silhouette[1], silhouette[0].shape)  # K, (H, W)
-        self._rest_F_inverse = np.eye(3)  # settle() sets every particle's F of the loaded rest state
+        # each particle's F at rest, inverted: settle() sets it where it loaded a body
+        eye = np.broadcast_to(np.eye(3, dtype=np.float32), (len(self.masses), 3, 3))
+        self._rest_F_inverse = wp.array(eye, dtype=wp.mat33, device=device)
+        self._world_F = wp.empty_like(self._rest_F_inverse)
         self.settled: rest_state.Settled | None = None  # what run()'s settle found
         self.wave_speed = max(wave_speed(m) for m in self.materials)
         self.n_frames = int(round(physics.duration_s * physics.fps)) + 1
@@ -395,7 +398,7 @@ class Simulation:
                                                    result.relaxation_s, g, self.grid.dx)):
                 result.giving_way.append(k)
         s.reset(rest_sim, keep=np.isin(self.object_id, deformable))
-        self._rest_F_inverse = np.linalg.inv(s.F.numpy().astype(np.float64))
+        self._rest_F_inverse.assign(np.linalg.inv(s.F.numpy().astype(np.float64)).astype(np.float32))
         log.info("settled objects %s into their weight in the photographed shape: %d substeps (%.3f s, %d kinetic "
                  "peaks, the last %.1e of the first), a sag of up to %.2f mm held up (%.0f s)", deformable,
                  steps, result.relaxation_s, relaxation.peaks, relaxation.residual, 1e3 * result.sag, result.wall_s)
@@ -526,7 +529,9 @@ class Simulation:
         x = x_sim @ self.Q
         positions[f] = x
         # the deformation since the photograph: the settled load's F is the rest state
-        F[f] = self.Q.T @ (s.F.numpy() @ self._rest_F_inverse) @ self.Q
+        wp.launch(deformation_since_rest, dim=len(self.masses), device=self.device,
+                  inputs=[s.F, self._rest_F_inverse, wp.mat33(self.Q.astype(np.float32)), self._world_F])
+        F[f] = self._world_F.numpy()
         m = self.masses
         wp.launch(elastic_energy, dim=len(m), device=self.device,
                   inputs=[s.materials, s.object_id, s.volume, s.F, s.history, self._energy])
