@@ -19,7 +19,7 @@ from scipy import ndimage
 from schemas.camera import MIN_DEPTH, project_points
 from schemas.solid import NODES, SolidGrid, gravity_axes, inside_share
 
-from .standing import Revolution
+from .standing import Revolution, signed_distance_px
 from .upright_box import UprightBox
 
 CENTRING_ROUNDS = 3
@@ -77,13 +77,18 @@ class Standing:
 class Prism:
     """A flat object: its silhouette's cone of rays cut to a slab, the points whose picture lies on the
     silhouette and within `half` m of the plane x . normal = middle (normal (3,) unit, camera frame; middle m).
-    outside_px (H,W): the silhouette's signed distance in pixels (negative inside); K (3,3) its camera."""
+    mask (H,W) bool: the silhouette; K (3,3) its camera."""
 
-    outside_px: np.ndarray
+    mask: np.ndarray
     K: np.ndarray
     normal: np.ndarray
     middle: float
     half: float
+    outside_px: np.ndarray = field(init=False, repr=False)
+    """(H,W) the silhouette's signed distance in pixels, negative inside (standing.signed_distance_px)."""
+
+    def __post_init__(self):
+        self.outside_px = -signed_distance_px(self.mask)
 
     def distance(self, points: np.ndarray) -> np.ndarray:
         """(P,) signed distance in m of camera-frame points (P,3): the larger of the slab's and the silhouette's

@@ -299,16 +299,15 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
     return t_in, t_out, solid.on_base, parts
 
 
-def cut_to_thickness(thickness: float, mask: np.ndarray, K: np.ndarray, t_in: np.ndarray, t_out: np.ndarray,
-                     down: np.ndarray) -> tuple[np.ndarray, np.ndarray, Prism]:
+def cut_to_thickness(thickness: float, mask: np.ndarray, K: np.ndarray, rays: np.ndarray, t_in: np.ndarray,
+                     t_out: np.ndarray, down: np.ndarray) -> tuple[np.ndarray, np.ndarray, Prism]:
     """A flat object `thickness` m thick: its silhouette `mask` (H,W) bool, photographed by K (3,3), cut to a
-    slab, where the body between t_in and t_out (N,) along its pixels' rays (row-major, camera frame, z = 1)
-    places it. (N,) t_in, (N,) t_out, each ray's chord through the slab, and the body (body.Prism). The slab
-    lies across the view made horizontal (gravity along `down` (3,)), as the medial balls' plane does, or
-    across the view itself seen from above (STEEPEST_VERTICAL_PLANE); its middle is the placed body's centre
-    of volume along its normal. The body's own shape across the view (a ball, a box) is the prior's guess,
-    which the thickness replaces: every pixel of the silhouette holds the slab."""
-    rays = input_rays(mask, K)
+    slab, where the body between t_in and t_out (N,) along its pixels' rays (N,3) (input_rays: row-major,
+    camera frame, z = 1) places it. (N,) t_in, (N,) t_out, each ray's chord through the slab, and the body
+    (body.Prism). The slab lies across the view made horizontal (gravity along `down` (3,)), as the medial
+    balls' plane does, or across the view itself seen from above (STEEPEST_VERTICAL_PLANE); its middle is the
+    placed body's centre of volume along its normal. The body's own shape across the view (a ball, a box) is
+    the prior's guess, which the thickness replaces: every pixel of the silhouette holds the slab."""
     volume = np.where(np.isfinite(t_in) & np.isfinite(t_out), t_out ** 3 - t_in ** 3, 0.0)
     centre = (volume * np.nan_to_num(0.5 * (t_in + t_out))) @ rays / volume.sum()
     view = centre / np.linalg.norm(centre)
@@ -316,8 +315,7 @@ def cut_to_thickness(thickness: float, mask: np.ndarray, K: np.ndarray, t_in: np
     normal = normal / np.linalg.norm(normal)
     along = rays @ normal
     middle, half = float(centre @ normal), 0.5 * thickness
-    outside_px = ndimage.distance_transform_edt(~mask) - ndimage.distance_transform_edt(mask)
-    return (middle - half) / along, (middle + half) / along, Prism(outside_px, K, normal, middle, half)
+    return (middle - half) / along, (middle + half) / along, Prism(mask, K, normal, middle, half)
 
 
 def standing_cut(rays: np.ndarray, t_in: np.ndarray, t_out: np.ndarray, down: np.ndarray, margin: float,
@@ -420,16 +418,16 @@ def object_depths(labels: np.ndarray, K: np.ndarray, sizes_m: Sequence[float], p
             t_in, t_out, on_solid_base, parts = solid_depths(mask, K, down, size, solid)
             log.info("object %d: a standing %s (its image overlaps the silhouette by %.3f)", k, solid.solid.kind,
                      solid.overlap)
+        rays = input_rays(mask, K)
         thickness = thicknesses_m[k] if thicknesses_m is not None else None
         if thickness is not None:
-            t_in, t_out, prism = cut_to_thickness(thickness, mask, K, t_in, t_out, down)
+            t_in, t_out, prism = cut_to_thickness(thickness, mask, K, rays, t_in, t_out, down)
             on_solid_base, parts = np.zeros(len(t_in), bool), [prism]
             log.info("object %d: cut to a slab %.0f mm thick across the view (objects[%d].thickness_m)", k,
                      1e3 * thickness, k)
         # the base: the body within a pixel's footprint and a half of the cut, or BASE_LAYER of its size
         layer = max(BASE_LAYER * size, 1.5 * float(np.median(t_in)) / K[0, 0])
-        front[mask], back[mask], cut, lowest = standing_cut(input_rays(mask, K), t_in, t_out, down, STAND_MARGIN * size,
-                                                    layer)
+        front[mask], back[mask], cut, lowest = standing_cut(rays, t_in, t_out, down, STAND_MARGIN * size, layer)
         base = np.zeros(mask.shape, bool)
         base[mask] = (front[mask] != t_in) | (back[mask] != t_out) | on_solid_base
         if cut > 0:

@@ -97,6 +97,15 @@ ROUND_FIRST = 0.01
 an upright cylinder's silhouette is a box's."""
 
 
+def signed_distance_px(mask: np.ndarray) -> np.ndarray:
+    """(H,W) float64: each pixel centre's signed distance in pixels to the outline of `mask` (H,W) bool, positive
+    inside. The outline lies midway between the inside and the outside pixel centres on either side of it: the
+    distance is exact wherever the nearest point of the outline lies on a straight run of pixel edges, and off by
+    at most (sqrt 2 - 1) / 2 px beside a convex corner."""
+    signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
+    return np.where(mask, signed - 0.5, signed + 0.5)
+
+
 @dataclass
 class GravityView:
     """A camera turned about the vertical to face the silhouette. R (3,3): rows the gravity frame's axes in the
@@ -116,10 +125,8 @@ class GravityView:
         across = np.cross(down, towards)
         across /= np.linalg.norm(across)
         forward = np.cross(across, down)
-        # the outline lies midway between the inside and the outside pixel centres on either side of it
-        signed = ndimage.distance_transform_edt(mask) - ndimage.distance_transform_edt(~mask)
-        signed = np.where(mask, signed - 0.5, signed + 0.5)
-        return GravityView(np.stack([across, down, forward]), K, mask, ndimage.gaussian_filter(signed, BLUR_PX))
+        return GravityView(np.stack([across, down, forward]), K, mask,
+                           ndimage.gaussian_filter(signed_distance_px(mask), BLUR_PX))
 
     def elevation_deg(self) -> float:
         """How far above the horizontal the camera sees the silhouette's centroid, degrees."""
