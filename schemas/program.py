@@ -64,13 +64,24 @@ def stage_parser(prog: str, description: str) -> argparse.ArgumentParser:
     return parser
 
 
-def resolve_device(choice: str) -> str:
-    """Map ``cpu|cuda|auto`` to a device name torch and Warp both accept ("cpu" or "cuda:0")."""
-    import torch
+def resolve_device(choice: str, runtime: str = "torch") -> str:
+    """Map ``cpu|cuda|auto`` to a device name torch and Warp both accept ("cpu" or "cuda:0").
 
+    `runtime` is the library the stage's work runs in, "torch" or "warp", and the one asked whether it
+    sees a GPU: a CPU build of torch sees none where Warp does, and a Warp stage need not pay torch's
+    import (seconds) for the question.
+    """
     if choice == "cpu":
         return "cpu"
-    if torch.cuda.is_available():
+    if runtime == "warp":
+        import warp as wp
+
+        visible = wp.is_cuda_available()
+    else:
+        import torch
+
+        visible = torch.cuda.is_available()
+    if visible:
         return "cuda:0"
     if choice == "cuda":
         raise InputError("--device", None, "cuda was asked for but no CUDA GPU is visible",

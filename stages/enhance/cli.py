@@ -55,7 +55,6 @@ def build_parser() -> argparse.ArgumentParser:
 
 def enhance(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
-    device = resolve_device(args.device)
     sheet_path = args.out.with_name("contact_sheet.png")
     refuse_overwriting({"--out": args.out, "contact_sheet.png": sheet_path},
                        {"--scene": scene.file, "--coarse": args.coarse, "--gaussians": args.gaussians,
@@ -74,6 +73,7 @@ def enhance(args: argparse.Namespace) -> None:
         if args.latents is None:
             raise InputError(args.scene, "enhance.backend", "the diffusion backend needs the inverted latents",
                              "run pm-invert first and pass its output with --latents")
+        device = resolve_device(args.device)  # the flow backend is OpenCV's on the CPU and never asks
         from .diffusion import enhance_video  # imports diffusers: only when asked for
 
         latents = read_artifact(args.latents, LatentsArtifact)

@@ -52,7 +52,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def simulate(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
-    device = resolve_device(args.device)
+    device = resolve_device(args.device, runtime="warp")
     wp.config.quiet = not args.verbose
     setup = args.out.parent / "setup.png"
     refuse_overwriting({"--out": args.out, "setup.png": setup}, {"--scene": scene.file, "--gaussians": args.gaussians})
