@@ -101,7 +101,8 @@ class Backdrop:
     object has gone, they would leave its outline behind. While the object still stands next to
     them, as in the photograph, they are what the photograph shows there, and the fill in their
     place would outline the object instead (at rest the ring held 80-94 % of frame 0's squared
-    error on the example and unseen scenes).
+    error on the example and unseen scenes). There, too, the render's fringe beyond the masks gives
+    way to the photograph (objects_alpha), for every backend that composites over the backdrop.
 
     Args:
         photo, fill: (h, w, 3) the photograph and the inpainted background at output resolution.
@@ -112,7 +113,11 @@ class Backdrop:
     def __init__(self, photo: np.ndarray, fill: np.ndarray, mask: np.ndarray, alpha_rest: np.ndarray):
         h, w = alpha_rest.shape
         self.photo, self.fill = photo.astype(np.float32), fill.astype(np.float32)
-        self.outside = 1.0 - resize_to((mask > 0).astype(np.float32), w, h)
+        self.objects_share = resize_to((mask > 0).astype(np.float32), w, h)
+        """(h, w) in [0, 1]: how much of each output pixel the objects' mask covers."""
+        self.outside = 1.0 - self.objects_share
+        self.touched = (self.objects_share > 0).astype(np.float32)
+        """(h, w) 1 on the output pixels the objects' mask covers at least in part, else 0."""
         beyond = (self.outside > 0.5).astype(np.uint8)
         ring = beyond.astype(bool) & (np.abs(self.fill - self.photo).max(-1) > 0)
         # the ring's width: how far the fill reaches past the masks (output pixels)
@@ -134,3 +139,22 @@ class Backdrop:
         beside = np.clip(near_now / np.maximum(self.near_rest, 1e-3), 0.0, 1.0) * (self.near_rest > 1e-3)
         fill = self.fill if shadow is None else self.fill * (1 - shadow[..., None])
         return fill + (beside * self.outside)[..., None] * (self.photo - fill)
+
+    def objects_alpha(self, alpha: np.ndarray, source_uv: np.ndarray, still: np.ndarray) -> np.ndarray:
+        """(h, w) float32 in [0, 1]: the frame's rendered alpha (h, w), less its fringe where it stands at rest.
+
+        The reconstruction's Gaussians along the silhouette reach past the objects' mask (on the examples the
+        render's alpha is still 1 two pixels beyond it, and falls to 0 over the next three): the photograph
+        shows the background there, so at rest that fringe has no colour of the objects to show, and it drew
+        a halo around them. A pixel that stands where its source is keeps its alpha by the share of that
+        source on the pixels the objects touch, so at rest the background (the photograph) shows beside them,
+        exactly. A pixel that moved keeps its alpha: the limb at rest projects onto the silhouette's pixels and
+        their neighbours, and a surface turned towards the camera from there is the object, not a fringe.
+
+        Args:
+            alpha: (h, w) the frame's rendered alpha.
+            source_uv: (h, w, 2) its source points at output resolution as rendered (unsmoothed: at rest
+                exactly each pixel's centre), NaN where there is no surface.
+            still: (h, w) standing_still(source_uv).
+        """
+        return alpha * (1 - still * (1 - sample_at(self.touched, source_uv))).astype(np.float32)

@@ -14,7 +14,8 @@ and shaded for where the surface faces now under the light fitted to the
 photograph (relight.py, unseen.py), and blended with the rendered alpha over
 the inpainted, shadow-free background, which the objects' shadows darken where
 they are now (shadow.py) and which shows the photograph itself beside an
-object wherever it still stands as at rest (compositing.Backdrop).
+object wherever it still stands as at rest, where the render's fringe beyond
+the objects' mask gives way to it (compositing.Backdrop).
 """
 from __future__ import annotations
 
@@ -112,26 +113,6 @@ def objects_reader(photo: np.ndarray, on_objects: np.ndarray) -> Callable[[np.nd
     return read
 
 
-def source_on_objects(touched: np.ndarray, uv: np.ndarray, still: np.ndarray) -> np.ndarray:
-    """(h, w) float32 in [0, 1]: the share of each pixel's alpha that shows the objects.
-
-    The reconstruction's Gaussians along the silhouette reach past the objects' mask (on the examples the
-    render's alpha is still 1 two pixels beyond it, and falls to 0 over the next three): the photograph
-    shows the background there, so at rest that fringe has no colour of the objects to show, and it drew
-    a halo around them. A pixel that stands where its source is keeps its alpha by the share of that
-    source on the objects' pixels, so at rest the background (the photograph) shows beside them, exactly.
-    A pixel that moved keeps its alpha: the limb at rest projects onto the silhouette's pixels and their
-    neighbours, and a surface turned towards the camera from there is the object, not a fringe.
-
-    Args:
-        touched: (h, w) bool, the output pixels the photograph's objects cover at least in part.
-        uv: (h, w, 2) the frame's source points as rendered (unsmoothed: at rest exactly each pixel's
-            centre), NaN where there is no surface.
-        still: (h, w) standing_still(uv).
-    """
-    return (1 - still * (1 - sample_at(touched.astype(np.float32), uv))).astype(np.float32)
-
-
 def smooth_source(uv: np.ndarray, sigma_px: float = SOURCE_SMOOTHING_PX) -> np.ndarray:
     """The source map with its per-pixel jitter removed, NaN where it was NaN.
 
@@ -180,10 +161,8 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
     T, h, w = coarse.alpha.shape
     scale = w / gaussians.width  # full-resolution image points -> output image points
     photo = resize_to(gaussians.photo, w, h)
-    objects_share = resize_to((gaussians.mask > 0).astype(np.float32), w, h)
-    touched = objects_share > 0
-    read_objects = objects_reader(photo, objects_share > 0.5)
     backdrop = Backdrop(photo, resize_to(gaussians.background, w, h), gaussians.mask, coarse.alpha[0])
+    read_objects = objects_reader(photo, backdrop.objects_share > 0.5)
     coverage = object_coverage(gaussians.mask, w, h)
     planes = MirrorPlanes.of(gaussians)
     continuation = Continuation.fit(coarse, gaussians, photo, coverage, read_objects, relight, planes)
@@ -205,7 +184,7 @@ def enhance_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact, thresho
         weight = (trusted * inside)[..., None]
         colour = weight * from_photo + (1.0 - weight) * rendered
         background = backdrop(coarse.alpha[t], still, shadows(t, still) if ground else None)
-        alpha = coarse.alpha[t] * source_on_objects(touched, rendered_uv, still)
+        alpha = backdrop.objects_alpha(coarse.alpha[t], rendered_uv, still)
         frames[t] = blend_over_background(colour, alpha, background)
         on = coarse.alpha[t] > 0.5
         log.info("frame %d/%d: %.0f%% of the object's pixels from the photograph, %.0f%% of them continuing "

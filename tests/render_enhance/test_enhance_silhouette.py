@@ -72,3 +72,15 @@ def test_frame0_beside_the_silhouette_is_the_photograph(run):
     assert (coarse.alpha[0][band] > 0.5).sum() > 0.5 * band.sum()  # the fringe is there to be shown
     error = np.abs(frames[0][band].astype(int) - gaussians.photo[band].astype(int)).max(-1)
     assert error.max() <= 3, f"{(error > 3).sum()} of {band.sum()} pixels off by up to {error.max()} levels"
+
+
+def test_the_diffusion_backends_frame0_beside_the_silhouette_is_the_photograph(run):
+    """The diffusion backend's blended frames, which it inverts and reads its Canny control from, composite the
+    render over the same backdrop: within 3 px outside the silhouette frame 0 is the photograph within 3 levels."""
+    from stages.enhance.diffusion.pipeline import blended_frames
+
+    gaussians, mask, coarse, _ = run
+    band = outside_band(mask)
+    blended = blended_frames(coarse, gaussians)
+    error = np.abs(blended[0][band].astype(int) - gaussians.photo[band].astype(int)).max(-1)
+    assert error.max() <= 3, f"{(error > 3).sum()} of {band.sum()} pixels off by up to {error.max()} levels"

@@ -1,6 +1,6 @@
 """The diffusion backend from artifacts to frames (paper Sec. 3.4): what pm-invert and pm-enhance run.
 
-    blended frames I_j = alpha * coarse + (1 - alpha) * background       (Sec. 3.4.1)
+    blended frames I_j = alpha * coarse + (1 - alpha) * background       (Sec. 3.4.1, blended_frames)
     controls: normalised inverse depth of the render, Canny edges of I_j
     latents.h5 = DDIM+ inversion of I_j                                   (pm-invert)
     video = coarse + enhanced sampling from latents.h5, decoded           (pm-enhance)
@@ -43,16 +43,27 @@ class VideoInputs:
         return [to_tensor(c).to(components.device, components.dtype) for c in (self.depth, self.canny)]
 
 
-def video_inputs(coarse: CoarseArtifact, gaussians: GaussiansArtifact, settings: DiffusionSettings) -> VideoInputs:
+def blended_frames(coarse: CoarseArtifact, gaussians: GaussiansArtifact) -> np.ndarray:
+    """(T, h, w, 3) u8 at the coarse frames' size: each render over its backdrop (compositing.Backdrop), the
+    photograph beside the objects where they stand as at rest, with the render's fringe beyond their mask
+    trimmed there as the flow backend trims it."""
     h, w = coarse.alpha.shape[1:]
     backdrop = Backdrop(resize_to(gaussians.photo, w, h), resize_to(gaussians.background, w, h), gaussians.mask,
                         coarse.alpha[0])
     scale = w / gaussians.width  # photograph pixels -> output pixels
-    blended = np.stack([blend_over_background(unpremultiply(rgb, alpha), alpha,
-                                              backdrop(alpha, standing_still(uv * scale)))
-                        for rgb, alpha, uv in zip(coarse.rgb, coarse.alpha, coarse.source_uv)])
+    frames = np.empty((len(coarse.alpha), h, w, 3), np.uint8)
+    for t, (rgb, alpha, source_uv) in enumerate(zip(coarse.rgb, coarse.alpha, coarse.source_uv)):
+        uv = source_uv * scale
+        still = standing_still(uv)
+        frames[t] = blend_over_background(unpremultiply(rgb, alpha), backdrop.objects_alpha(alpha, uv, still),
+                                          backdrop(alpha, still))
+    return frames
+
+
+def video_inputs(coarse: CoarseArtifact, gaussians: GaussiansArtifact, settings: DiffusionSettings) -> VideoInputs:
+    h, w = coarse.alpha.shape[1:]
     height, width = model_size(h, w, settings.resolution)
-    blended = np.stack([resize_to(f, width, height) for f in blended])
+    blended = np.stack([resize_to(f, width, height) for f in blended_frames(coarse, gaussians)])
     depth = np.stack([resize_to(d, width, height) for d in inverse_depth_control(coarse.depth, coarse.alpha)])
     return VideoInputs(blended, depth, canny_control(blended, settings.canny_thresholds))
 
