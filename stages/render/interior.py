@@ -19,11 +19,11 @@ elongated and turned at random, each moved off its lattice site by a random frac
 (:func:`grain_offsets`: a heap shows no lattice). A grain takes the photograph's colour where its rest
 position projects (:func:`rest_ray_colours`: a two-coloured body's inside keeps the colour of the part it
 belongs to, so a heap shows both); a porous solid's interior, the crumbs of its torn face, the colour of its
-object's lit half (:func:`crumb_colours`), with pores (:func:`pores`). A grain of sand is a little brighter or
-darker at the same hue (:func:`grain_colours`), with two faces (:func:`facets`), lit
-from above: a brighter cap over a darker body, by its colour's albedo (:func:`grain_relief`,
-:func:`lit_caps`), over the shadowed crevice under it (:func:`crevices`: the gaps between a heap's grains
-are dark, as sand's are, where flat grains edge to edge read as a heap of discs).
+object's lit half (:func:`crumb_colours`). A particle is a centimetre of material, not one of its grains: over
+it lie the material's own grains and pores, sized from the material and drawn no finer than the frame shows
+(:func:`fine_structure`, :func:`fine_features`): sand's and snow's grains, brighter and darker as a granular
+photograph's pixels are at as many grains a pixel, spilling past their particle so that neighbours mix; a
+porous solid's pores, lit as light bouncing in their cavities (:func:`pore_shades`).
 
 At rest the interior must stay hidden behind the surface, so that frame 0 is the
 reconstruction's render. The lattice's outer cells reach up to a cell past the
@@ -39,6 +39,7 @@ interior appears where the surface opens, and only there.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -81,37 +82,50 @@ and a heap of them reads as a blur of one colour."""
 GRAIN_EDGE_SIGMAS = math.sqrt(2 * math.log(2 * GRAIN_OPACITY))
 """A hard grain's alpha-1/2 radius in standard deviations: opacity exp(-r^2 / 2 sigma^2) = 1/2 at
 r = sigma sqrt(2 ln(2 GRAIN_OPACITY))."""
-GRAIN_SHADE = 0.13
-"""Spread (standard deviation) of the grains' brightness relative to their colour: measured on
-scikit-image's gravel photograph (data.gravel, grains about 16 px), its brightness blurred to a
-quarter of a grain against the mean over a few grains (0.19 at an eighth, 0.13 at a quarter)."""
+GRAIN_SHADE = 0.11
+"""Spread (standard deviation) of a pixel's brightness over its neighbourhood's (a Gaussian of 2 px) where a pixel
+spans one grain: scikit-image's gravel photograph (data.gravel, grains about 16 px) area-averaged to 16 px a pixel.
+Where a pixel spans k grains it spreads k^-GRAIN_SHADE_FALLOFF of it (0.065, 0.045 and 0.034 at 2, 3 and 4)."""
+GRAIN_SHADE_FALLOFF = 0.86
+"""Power of the grains across a pixel by which its brightness's spread falls (GRAIN_SHADE): 1 for grains
+shaded each on its own; the gravel's falls slower, its light and shade spanning a few grains."""
+FINE_BLUR = 0.39
+"""Share of a drawn grain's brightness spread that the frame's pixels show: a grain is a soft Gaussian, splat's
+dilation widens it, and it overlaps its neighbours. Measured on a flat layer of sand at 1 to 4 grains a pixel,
+drawn with a spread s (0.38 to 0.42 of s; tests/render_enhance/test_render_grains.py)."""
 GRAIN_SIZES = (0.6, 1.3)
-"""Range of a grain's diameter over the lattice's grain (uniform, then scaled by 1 / sqrt of the
-mean square, so the grains cover on average the area the lattice's grain does): sand's grain sizes
-spread about twofold within a sieve fraction, and grains all of one size on a lattice read as scales."""
+"""Range of a flowing sand particle's diameter over the lattice's grain (uniform, then scaled by 1 / sqrt of
+the mean square, so that the particles cover on average the area the lattice's do): particles all of one
+size on a lattice read as scales."""
 GRAIN_ELONGATION = 1.5
-"""A grain's long axis over its two short ones: sand grains' aspect ratios lie about 1.2 to
-2 (a heap of round discs reads as bubbles, not sand)."""
-CAP_RADIUS = 0.6
-"""Radius of a grain's lit cap over the grain's (lit_caps): the cap, centred 1 - CAP_RADIUS grain radii
-above the grain's centre, touches the grain's top and stands for its upper part, which faces the sky; the
-rest of the grain, which faces the heap below, is its body."""
-CREVICE_SHADE = 0.5
-"""Brightness of the crevice under a grain over the grain's colour (crevices): on scikit-image's gravel
-photograph (data.gravel, grains about 16 px), its brightness blurred by a sixteenth of a grain against the mean
-over a few grains is below 0.54 on 5 % of the pixels and below 0.65 on 10 %: the gaps between the grains."""
-CREVICE_DROP = 0.3
-"""How far a grain's crevice lies below the grain, in the grain's reach that way (its alpha-1/2 radius): the
-grain's shadow under a sky above shows as a dark crescent under its lower edge, narrower on its sides, none
-above it (there the grain above's shadow falls)."""
-PORE_RADII = (0.2, 0.5)
-"""Range of the radius of the pore in a torn solid's grain over the grain's (pores, uniform): cavities of several
-sizes, up to a quarter of a grain's picture."""
-FACETS = 2
-"""Faces drawn on each grain of sand or snow (facets)."""
-FACET_RADIUS = 0.55
-"""Radius of a grain's face over the grain's (facets): about a third of its picture each, two of them and the
-grain's own colour between them."""
+"""A flowing sand particle's long axis over its two short ones (a heap of round discs reads as bubbles)."""
+GRAIN_DIAMETER = 0.5e-3
+"""Diameter of a grain of sand or snow, m: medium sand (0.25-0.5 mm on Wentworth's scale), old snow's
+rounded grains (0.2-1 mm). A particle of the simulation (a lattice spacing, about a centimetre) holds
+thousands of them: its picture is their texture, not one grain."""
+PORE_DIAMETERS = (0.3e-3, 3e-3)
+"""Range of the diameter of a crumb's pores, m (log-uniform, so that most are small): bread's gas cells,
+from a tenth of a millimetre to a few, half of them under a millimetre."""
+PORE_SHARE = 0.3
+"""Share of a torn crumb's face that its pores take: the void fraction of bread's sliced crumb (0.2-0.5 in
+image analyses of white bread)."""
+PORE_OPENINGS = (0.25, 0.75)
+"""Range of the share f of a pore's sphere that the torn face cuts away (uniform): from a cavity barely
+opened to a shallow bowl. Lit by a sky that fills its opening, the inside of a sphere sees the opening with
+view factor f wherever it stands, and the rest of itself with 1 - f, so with albedo rho its radiosity is
+rho f E / (1 - rho (1 - f)) against a flat face's rho E (pore_shades)."""
+FINE_PX = 1.5
+"""The smallest diameter (output px, at the particle's distance at rest) a grain or pore is drawn at: splat's
+antialiasing (DILATION_PX2) widens it to about 2 px, and a finer Gaussian would be that filter alone. A drawn
+grain larger than the material's stands for the grains within it (fine_structure)."""
+GRAIN_REACH = 1.5
+"""How far from its particle's centre a grain of sand or snow lies, in the particle's picture's radii: the
+grains of neighbouring particles interleave where they meet, as sand of two colours does where it mixes, and
+the heap shows no particle's outline."""
+FWHM_SIGMAS = 2 * math.sqrt(2 * math.log(2))
+"""A Gaussian's full width at half maximum in standard deviations (2.355)."""
+FINE_PER_PARTICLE = 64
+"""At most this many grains or pores drawn on one particle (a particle 12 px across at FINE_PX)."""
 EDGE_PX = 2
 """Pixels inside its silhouette from which the photograph gives a grain its colour (the silhouette's own mix in the
 background)."""
@@ -273,7 +287,7 @@ def crumb_colours(object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray) 
     The photograph shows an object's surface shaded (its side away from the light, the dark lines of a
     crust's texture, the cavities between its bumps): the mean over all its pixels is darker than its
     material. A freshly opened face has none of that surface's weathering, and its own shading comes from
-    its grains and the pores between them (grain_relief, crevices): its colour is the object's lit half.
+    its pores (fine_structure): its colour is the object's lit half.
 
     Args:
         object_id: (N,); photo: (H, W, 3) u8 RGB; labels: (H, W) 0 background, k + 1 object k
@@ -289,160 +303,108 @@ def crumb_colours(object_id: np.ndarray, photo: np.ndarray, labels: np.ndarray) 
     return colours
 
 
-def grain_colours(colours: np.ndarray) -> np.ndarray:
-    """(P, 3) each particle's colour as a grain: ``colours`` (P, 3) in [0, 1] scaled by 1 + GRAIN_SHADE n,
-    n a standard normal number cut at +-2 (seeded: the same for every run), and no further than the
-    brightest channel reaches 1, so that every grain keeps its colour's hue. A heap of grains of one
-    colour, or a torn face, is not one flat colour: each grain's facets catch the light differently."""
-    shade = 1 + GRAIN_SHADE * np.clip(np.random.default_rng(0).standard_normal(len(colours)), -2, 2)
-    return hue_kept(torch.as_tensor(colours), torch.as_tensor(shade)).numpy()
+class FineStructure(NamedTuple):
+    """The grains or pores drawn on the particles, M in all, fixed at rest (fine_structure): owner (M,) the
+    particle each lies on; place (M, 2) where in its particle's picture (a point of the unit disc, the picture's
+    right and down, scaled to the particle's alpha-1/2 ellipse as drawn); sigma (M,) its standard deviation, m
+    (round); factor (M, 3) its colour over its particle's."""
+
+    owner: np.ndarray
+    place: np.ndarray
+    sigma: np.ndarray
+    factor: np.ndarray
 
 
-def hue_kept(colours: torch.Tensor, factor: torch.Tensor) -> torch.Tensor:
-    """(N, 3) ``colours`` (N, 3) in [0, 1] times ``factor`` (N,), the factor no larger than takes the brightest
-    channel to 1: brightened, a colour keeps its hue where a channel clipped at 1 would turn it."""
-    return colours * torch.minimum(factor, 1 / colours.amax(1).clamp_min(1e-6))[:, None]
+def pore_shades(colours: np.ndarray, openings: np.ndarray) -> np.ndarray:
+    """(N, 3) the brightness of a pore's inside over its face's, per channel: f / (1 - rho (1 - f)), rho the
+    face's colour ``colours`` (N, 3) in [0, 1] taken as its albedo, f the share of the pore's sphere the face
+    cuts away (``openings`` (N,), PORE_OPENINGS): a pore's light bounces off its own walls, so a light crumb's
+    pores are lighter than a dark one's, and warmer than its face (its darker channels lose more)."""
+    f = openings[:, None]
+    return f / (1 - colours * (1 - f))
 
 
-def grain_relief(colours: np.ndarray) -> np.ndarray:
-    """(P,) how much brighter the top of a grain is than its mean, per grain radius of height:
-    k = (1 - a) / (1 + a), a the luma (Rec. 601) of its colour ``colours`` (P, 3) in [0, 1] taken as the
-    albedo of the heap or torn face around it.
+def fine_structure(granular: np.ndarray, porous: np.ndarray, covariances: np.ndarray, depth: np.ndarray,
+                   focal: float, colours: np.ndarray) -> FineStructure:
+    """The grains of sand or snow and the pores of crumb drawn on each particle once its material flows, sized
+    from the material (GRAIN_DIAMETER, PORE_DIAMETERS), not from the lattice (seeded: the same for every run).
 
-    A Lambertian grain of normal n under a sky of radiance L above and a heap of the grain's albedo a
-    below (lit by the same sky) receives pi L ((1 + n.u) / 2 + a (1 - n.u) / 2), u up. Seen from the
-    side, n.u is the height y over the grain's image in radii (mean 0), so its shading over its mean is
-    1 + k y: a dark grain's top and underside differ most; a white grain (snow) is lit alike all over
-    (a relief under 1/255, which moves no channel by a grey level, counts as 0: no cap)."""
-    albedo = np.clip(colours @ LUMA, 0.0, 1.0)
-    relief = (1 - albedo) / (1 + albedo)
-    return np.where(relief >= 1 / 255, relief, 0.0)  # less moves no channel by a grey level
+    A grain or pore of diameter d is drawn at max(d, FINE_PX z / focal), z the particle's distance ``depth``
+    (P,), m, at rest and ``focal`` the frames' focal length, px: a round Gaussian whose full width at half
+    maximum is that diameter, of opacity 1. With splat's dilation (DILATION_PX2) its alpha sums to
+    a = 2 pi (sigma^2 + DILATION_PX2 (z / focal)^2) over the picture, the area it covers. The particle is a
+    ball of its grain's volume (``covariances`` (P, 3, 3) m^2, grain_shapes), of alpha-1/2 radius r.
 
-
-def grain_reach(means: torch.Tensor, covariances: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """Where grains (means (C, 3) m, covariances (C, 3, 3) m^2) reach in the picture: the picture's up (3,)
-    and each grain's unit direction from the eye (C, 3), world frame, and each grain's reach along them (C,)
-    and (C,), m: its radius at alpha 1/2, a hard grain's edge (GRAIN_OPACITY)."""
-    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
-    up = -to_camera_R[1, :3]
-    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
-    view = means - eye
-    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
-
-    def reach(d: torch.Tensor) -> torch.Tensor:
-        return GRAIN_EDGE_SIGMAS * torch.einsum("pi,pij,pj->p", d, covariances, d).clamp_min(0).sqrt()
-
-    return up, view, reach(up.expand_as(view)), reach(view)
-
-
-def lit_caps(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
-             relief: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """Grains shaded as lit from above: (P, 3) the colours of the grains' bodies, and of the C grains whose
-    relief (P,) is above 0 the caps' (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities and
-    (C, 3) colours, drawn over them. A particle of relief 0 keeps its colour and has no cap.
-
-    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as
-    drawn this frame), the cap is the grain shrunk to CAP_RADIUS (rho) of its size, raised along the
-    picture's up by (1 - rho) of the grain's reach that way (its radius at alpha 1/2: a hard grain's
-    edge) and brought a hundredth of its reach nearer the camera, so that it sorts in front of its own
-    grain. Shading 1 + k y (grain_relief, k the relief) averaged over the cap, a disc of radius rho centred
-    at height 1 - rho in the grain's disc, is 1 + k (1 - rho); over the rest of the disc it is
-    1 - k rho^2 / (1 + rho): over the whole grain 1, so a grain keeps its colour on average. The cap's
-    factor stops where a channel would pass 1, so its hue stays (hue_kept)."""
-    lit = torch.nonzero(relief > 0)[:, 0]
-    k, grain = relief[lit].to(colours.dtype), covariances[lit]
-    up, view, reach_up, reach_view = grain_reach(means[lit], grain, camera)
-    cap_means = means[lit] + ((1 - CAP_RADIUS) * reach_up)[:, None] * up - (0.01 * reach_view)[:, None] * view
-    body = colours * (1 - relief.to(colours.dtype) * CAP_RADIUS ** 2 / (1 + CAP_RADIUS))[:, None]
-    return body, cap_means, CAP_RADIUS ** 2 * grain, opacities[lit], hue_kept(colours[lit], 1 + k * (1 - CAP_RADIUS))
-
-
-def crevices(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
-             shadowed: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """The shadowed crevices under the C grains whose ``shadowed`` (P,) weight is above 0 (grains, by how far
-    their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities and (C, 3)
-    colours, drawn with the grains.
-
-    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as drawn this
-    frame), the crevice is the grain's own shape lowered along the picture's down by CREVICE_DROP of the
-    grain's reach that way (its radius at alpha 1/2) and moved back along the view by its whole reach, so that it
-    sorts behind its grain and behind the neighbours beside it: it shows only where no grain at about its depth
-    covers it, in the gaps under the grains, as the shadow a grain casts into the heap under a sky above. Its
-    colour is the grain's times CREVICE_SHADE (the hue kept: a heap keeps its colours' shares), its opacity the
-    grain's times the weight (none while the body holds its shape)."""
-    shown = torch.nonzero(shadowed > 0)[:, 0]
-    grain = covariances[shown]
-    up, view, reach_up, reach_view = grain_reach(means[shown], grain, camera)
-    crevice_means = means[shown] - (CREVICE_DROP * reach_up)[:, None] * up + reach_view[:, None] * view
-    weight = shadowed[shown].to(opacities.dtype)
-    return crevice_means, grain, opacities[shown] * weight, colours[shown] * CREVICE_SHADE
-
-
-def inlays(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, weight: torch.Tensor,
-           size: np.ndarray, place: np.ndarray, nearer: float, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """Smaller copies of the C grains whose ``weight`` (P,) is above 0, drawn over them: (C, 3) means (m), (C, 3, 3)
-    covariances (m^2) and (C,) opacities (the grain's times the weight).
-
-    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), as drawn this frame), the inlay is the
-    grain shrunk to ``size`` (P,) of its own, centred at ``place`` (P, 3) in the grain's own frame (the unit ball
-    its half-alpha ellipsoid is the image of), brought ``nearer`` of its reach towards the camera so that it
-    sorts in front of its grain (as a cap does)."""
-    shown = torch.nonzero(weight > 0)[:, 0]
-    grain = covariances[shown]
-    scale = torch.as_tensor(size, dtype=grain.dtype, device=grain.device)[shown]
-    _, view, _, reach_view = grain_reach(means[shown], grain, camera)
-    root = torch.linalg.cholesky(grain + 1e-18 * torch.eye(3, dtype=grain.dtype, device=grain.device))
-    at = torch.as_tensor(place, dtype=grain.dtype, device=grain.device)[shown]
-    inlay_means = (means[shown] + GRAIN_EDGE_SIGMAS * (root @ at[:, :, None])[..., 0]
-                   - (nearer * reach_view)[:, None] * view)
-    return inlay_means, scale[:, None, None] ** 2 * grain, opacities[shown] * weight[shown].to(opacities.dtype)
-
-
-def pores(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
-          porous: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """The pores of a torn solid's face, one in each of the C grains whose ``porous`` (P,) weight is above 0
-    (a solid's grains, by how far their material flows): (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,)
-    opacities and (C, 3) colours, drawn with the grains.
-
-    Broken solid material (bread's crumb, a cake's, a sponge's) is a continuous matrix with cavities in it, not
-    a heap of grains with gaps under them. Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,),
-    colours (P, 3) in [0, 1], as drawn this frame), the pore is an inlay (:func:`inlays`) of a size uniform over
-    PORE_RADII of the grain's, anywhere inside it (a point uniform in the ball shrunk by that size, seeded per
-    particle: the same for every frame and run; a pore centred in every grain reads as a ring), in the grain's
-    colour times CREVICE_SHADE (a cavity sees little light; the hue kept), none while the body holds its shape.
-    A grain drawn in front of it covers it, as the matrix in front of a cavity hides it."""
+    Sand and snow (``granular`` (P,) bool): pi (GRAIN_REACH r)^2 / a grains, about one over each point of the
+    disc they lie in, each of brightness 1 + s n, n a normal number cut at +-2:
+    s = GRAIN_SHADE min(1, d / p)^GRAIN_SHADE_FALLOFF / FINE_BLUR, p a pixel's width there, so that a pixel's
+    brightness spreads as the gravel's where a pixel spans as many grains (p / d). Crumb (``porous``): pores of
+    log-uniform diameters over PORE_SHARE of the particle's share of a face (its volume's power 2/3), each of
+    its colour ``colours`` (P, 3) in [0, 1] times pore_shades. At most FINE_PER_PARTICLE on a particle; none on
+    the others."""
     rng = np.random.default_rng(3)
-    size = rng.uniform(*PORE_RADII, len(means))
-    place = rng.standard_normal((len(means), 3))
-    place *= ((1 - size) * rng.uniform(0, 1, len(means)) ** (1 / 3) / np.linalg.norm(place, axis=1))[:, None]
-    pore_means, pore_covariances, pore_opacities = inlays(means, covariances, opacities, porous, size, place, 0.01,
-                                                          camera)
-    return pore_means, pore_covariances, pore_opacities, colours[porous > 0] * CREVICE_SHADE
+    P = len(depth)
+    px = depth / focal  # m a pixel at each particle
+    floor = FINE_PX * px
+    radius = GRAIN_EDGE_SIGMAS * np.abs(np.linalg.det(covariances)) ** (1 / 6)
+    grain = np.maximum(GRAIN_DIAMETER, floor)
+    low, high = np.log(PORE_DIAMETERS)
+    # E[max(d, floor)^2] of d log-uniform on PORE_DIAMETERS
+    cut = np.clip(np.log(np.maximum(floor, 1e-12)), low, high)
+    pore_square = (floor ** 2 * (cut - low) + (np.exp(2 * high) - np.exp(2 * cut)) / 2) / (high - low)
+    covers = lambda square: 2 * np.pi * (square / FWHM_SIGMAS ** 2 + splat.DILATION_PX2 * px ** 2)  # noqa: E731
+    count = np.where(granular, np.ceil(np.pi * (GRAIN_REACH * radius) ** 2 / covers(grain ** 2)),
+                     np.where(porous, np.ceil(PORE_SHARE * (4 / 3 * np.pi * radius ** 3) ** (2 / 3)
+                                              / covers(pore_square)), 0))
+    count = np.minimum(count, FINE_PER_PARTICLE).astype(np.int64)
+    owner = np.repeat(np.arange(P), count)
+    M = len(owner)
+    angle, reach = rng.uniform(0, 2 * np.pi, M), np.sqrt(rng.uniform(0, 1, M))
+    reach *= np.where(granular[owner], GRAIN_REACH, 1.0)
+    place = reach[:, None] * np.stack([np.cos(angle), np.sin(angle)], 1)
+    pore = np.maximum(np.exp(rng.uniform(low, high, M)), floor[owner])
+    diameter = np.where(granular[owner], grain[owner], pore)
+    spread = GRAIN_SHADE * np.minimum(1, GRAIN_DIAMETER / px[owner]) ** GRAIN_SHADE_FALLOFF / FINE_BLUR
+    shade = 1 + spread * np.clip(rng.standard_normal(M), -2, 2)
+    factor = np.where(granular[owner, None], shade[:, None],
+                      pore_shades(colours[owner], rng.uniform(*PORE_OPENINGS, M)))
+    return FineStructure(owner, place, diameter / FWHM_SIGMAS, factor)
 
 
-def facets(means: torch.Tensor, covariances: torch.Tensor, opacities: torch.Tensor, colours: torch.Tensor,
-           faceted: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
-    """The faces of the C grains whose ``faceted`` (P,) weight is above 0 (sand and snow, by how far their material
-    flows), FACETS of each: (F C, 3) means (m), (F C, 3, 3) covariances (m^2), (F C,) opacities and (F C, 3)
-    colours, drawn with the grains.
+def fine_features(means: torch.Tensor, covariances: torch.Tensor, colours: torch.Tensor, weight: torch.Tensor,
+                  fine: FineStructure, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+    """The grains and pores (fine_structure, its fields as tensors) of the particles whose ``weight`` (P,) in
+    [0, 1] is above 0 (how far their material flows, where the frame shows them), drawn over them: (C, 3) means
+    (m), (C, 3, 3) covariances (m^2), (C,) opacities (the weight) and (C, 3) colours.
 
-    A grain of sand is angular: its faces catch the light each its own way, and its outline is not an ellipse.
-    Of each grain (means (P, 3), covariances (P, 3, 3), opacities (P,), colours (P, 3) in [0, 1], as drawn this
-    frame), a face is an inlay (:func:`inlays`) FACET_RADIUS of its size, centred in a random direction (seeded
-    per particle: the same for every frame and run) at 1 - FACET_RADIUS / 2 of its radius, so that it stands out
-    of the outline by half its own, in the grain's colour times 1 + GRAIN_SHADE n (n normal, cut at +-2; capped
-    where a channel would pass 1: hue_kept)."""
-    rng = np.random.default_rng(4)
-    shown = faceted > 0
-    parts = []
-    for face in range(FACETS):
-        place = rng.standard_normal((len(means), 3))
-        place *= ((1 - FACET_RADIUS / 2) / np.linalg.norm(place, axis=1))[:, None]
-        shade = torch.as_tensor(1 + GRAIN_SHADE * np.clip(rng.standard_normal(len(means)), -2, 2),
-                                dtype=colours.dtype, device=colours.device)[shown]
-        parts.append((*inlays(means, covariances, opacities, faceted, np.full(len(means), FACET_RADIUS), place,
-                              0.02 * (face + 1), camera), hue_kept(colours[shown], shade)))
-    return tuple(torch.cat(part) for part in zip(*parts))
+    Of each particle (means (P, 3), covariances (P, 3, 3), colours (P, 3) in [0, 1], as drawn this frame), a
+    grain or pore lies at its ``place`` in the particle's alpha-1/2 ellipse as the camera's axes see it, moved
+    across the particle's ray (so that its distance is the particle's) and brought a twentieth of the
+    particle's reach nearer the camera, so that it sorts in front of its own particle and behind the ones
+    in front. Its colour is the particle's times its factor, no channel past 1 (a brighter grain keeps its
+    hue)."""
+    drawn = torch.nonzero(weight[fine.owner] > 0)[:, 0]
+    owner = fine.owner[drawn]
+    grain = covariances[owner]
+    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
+    axes = to_camera_R[:2, :3]  # the picture's right and down, world frame
+    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
+    view = means[owner] - eye
+    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    across = axes @ grain @ axes.T  # (C, 2, 2) the particle's picture, m^2
+    a, b, c = across[:, 0, 0].clamp_min(0).sqrt(), across[:, 1, 0], across[:, 1, 1]
+    lower = torch.where(a > 0, b / a.clamp_min(1e-30), 0.0)
+    root = torch.stack([torch.stack([a, torch.zeros_like(a)], 1),
+                        torch.stack([lower, (c - lower ** 2).clamp_min(0).sqrt()], 1)], 1)
+    place = fine.place[drawn].to(means.dtype)
+    offset = GRAIN_EDGE_SIGMAS * (root @ place[:, :, None])[..., 0] @ axes
+    offset = offset - (offset * view).sum(1, keepdim=True) * view
+    reach_view = GRAIN_EDGE_SIGMAS * torch.einsum("pi,pij,pj->p", view, grain, view).clamp_min(0).sqrt()
+    sigma, factor = fine.sigma[drawn].to(grain.dtype), fine.factor[drawn].to(colours.dtype)
+    colour = colours[owner] * factor
+    return (means[owner] + offset - (0.05 * reach_view)[:, None] * view,
+            sigma[:, None, None] ** 2 * torch.eye(3, dtype=grain.dtype, device=grain.device),
+            weight[owner] * INTERIOR_OPACITY, colour / colour.amax(1, keepdim=True).clamp_min(1))
 
 
 def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor, camera: splat.Camera) -> torch.Tensor:

@@ -31,9 +31,9 @@ from schemas.camera import project_points
 from schemas.materials import PRESETS
 from schemas.video import even_size
 
-from .interior import (ELASTIC, GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, Mixing, crevices, crumb_colours,
-                       facets, fitted_photograph, grain_colours, grain_offsets, grain_relief, grain_shapes,
-                       hidden_at_rest, lattice_spacing, lit_caps, pores, rest_ray_colours, surface_under, undilated)
+from .interior import (ELASTIC, GRAIN_SIGMA, GRANULAR, INTERIOR_OPACITY, POROUS, FineStructure, Mixing,
+                       crumb_colours, fine_features, fine_structure, fitted_photograph, grain_offsets, grain_shapes,
+                       hidden_at_rest, lattice_spacing, rest_ray_colours, surface_under, undilated)
 from .silhouette import STILL_PX, TURN_TOWARDS, narrowed_to_mask
 from .source_map import (AFFINE_CHANNELS, MIN_ALPHA, MIN_VOTE, MOMENT_CHANNELS, affine_source_maps, coherence,
                          facing_normals, full_camera, inverse_deformation, map_moments, rest_visibility,
@@ -58,25 +58,21 @@ class Particles(NamedTuple):
     drawn from its particle (interior.grain_offsets); grain_covariances (P, 3, 3), m^2,
     grain_opacities (P,) and grain_colors (P, 3), the shape, opacity and colour a particle takes as
     its material flows (interior.Mixing): a hard grain of the lattice's size, in the photograph's colour on
-    its rest ray, a porous solid's interior in its crumb's, shaded (interior.grain_shapes,
-    grain_colours; its rest covariance, opacity and colour where its object has no lattice);
-    opacities (P,); opaque_at_rest (P,) 0 for a fill particle that would show at rest
-    (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors (P, 3)
-    at rest (a fill particle: the surface's in front of it at rest, interior.fitted_photograph, or a porous
-    solid's crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
+    its rest ray, a porous solid's interior in its crumb's (interior.grain_shapes; its rest covariance, opacity
+    and colour where its object has no lattice); opacities (P,); opaque_at_rest (P,) 0 for a fill particle that
+    would show at rest (interior.hidden_at_rest), which is transparent until its material flows, else 1; colors
+    (P, 3) at rest (a fill particle: the surface's in front of it at rest, interior.fitted_photograph, or a
+    porous solid's crumb, interior.crumb_colours); rest_seen (P,) visibility in the photograph
     (source_map.rest_visibility; 0 for the interior); rest_normals (P, 3) world frame (the interior
     takes the normal of the surface it lies under); surface (P,) 1 for a Gaussian, 0 for the interior;
-    relief (P,) how much a grain of sand or snow is lit from above once its material flows
-    (interior.grain_relief; 0 for the other materials); grains (P,) 1 for a particle of an object with a
-    lattice, a hard grain once its material flows (interior.undilated), else 0; granular (P,) 1 for a grain
-    of sand or snow (of an object with a lattice), which shows a shadowed crevice under it once its material
-    flows (interior.crevices), else 0; porous (P,) 1 for a grain of a porous solid (interior.POROUS, of an
-    object with a lattice), which shows a pore in it once its material flows (interior.pores), else 0;
-    narrowing (P,) and fading (P,) the factors on a Gaussian's size and opacity that keep it within a pixel of
-    its object's mask once it moves (silhouette.narrowed_to_mask; 1 for the interior); rest_pixels (P, 2)
-    where each particle stands in the frames at rest (output pixels); rest_facing (P,) in [0, 1] how squarely
-    each particle faces the camera at rest (facing_towards): a Gaussian turned further towards it than that
-    (silhouette.TURN_TOWARDS) is narrowed less; camera the frames'.
+    grains (P,) 1 for a particle of an object with a lattice, a hard grain once its material flows
+    (interior.undilated), else 0; fine the grains of sand or snow and the pores of a porous solid drawn on
+    the particles of an object with a lattice once their material flows (interior.fine_structure, its fields
+    as tensors); narrowing (P,) and fading (P,) the factors on a Gaussian's size and opacity that keep it
+    within a pixel of its object's mask once it moves (silhouette.narrowed_to_mask; 1 for the interior);
+    rest_pixels (P, 2) where each particle stands in the frames at rest (output pixels); rest_facing (P,) in
+    [0, 1] how squarely each particle faces the camera at rest (facing_towards): a Gaussian turned further
+    towards it than that (silhouette.TURN_TOWARDS) is narrowed less; camera the frames'.
     """
 
     rest_means: torch.Tensor
@@ -92,10 +88,8 @@ class Particles(NamedTuple):
     rest_seen: torch.Tensor
     rest_normals: torch.Tensor
     surface: torch.Tensor
-    relief: torch.Tensor
     grains: torch.Tensor
-    granular: torch.Tensor
-    porous: torch.Tensor
+    fine: FineStructure
     narrowing: torch.Tensor
     fading: torch.Tensor
     rest_pixels: torch.Tensor
@@ -197,10 +191,11 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
     # a grain shows the material at its place: a surface Gaussian's own colour may hold the background it was
     # fitted beside (the silhouette's), the photograph 2 px inside its object's does not; a crumb is its object's
     grain_from = torch.where(t(porous & ~trajectories.is_gaussian)[:, None], rest_colors, on_rest_ray)
-    # a heap's grains catch the light each its own way; a torn solid's are one matrix, its pores its texture
-    shaded_grains = torch.where((has_lattice & t(granular))[:, None],
-                                t(grain_colours(grain_from.cpu().numpy())).to(colors.dtype), grain_from)
     rest_means = torch.cat([means, fill_means])
+    lattice = has_lattice.cpu().numpy()
+    fine = fine_structure(granular & lattice, porous & lattice, grain_shape,
+                          to_camera(rest_means, camera.world_to_camera)[:, 2].cpu().numpy(), float(camera.K[0, 0]),
+                          grain_from.cpu().numpy())
     return Particles(
         rest_means=rest_means, rest_covariances=rest_covariances,
         # a heap's grains lie anywhere in their cells; a torn solid's stay on its lattice, so that its pieces'
@@ -214,15 +209,12 @@ def rendered_particles(gaussians: GaussiansArtifact, trajectories: TrajectoriesA
         grain_opacities=torch.where(has_lattice, t(grain_opacities).to(opacities.dtype), opacities),
         opaque_at_rest=torch.cat([torch.ones(G, device=device), hidden.to(opacities.dtype)]),
         colors=rest_colors,
-        grain_colors=shaded_grains,
+        grain_colors=grain_from,
         rest_seen=torch.cat([rest_seen, torch.zeros(N, dtype=rest_seen.dtype, device=device)]),
         rest_normals=torch.cat([normals, normals[under]]),
         surface=torch.cat([torch.ones(G, device=device), torch.zeros(N, device=device)]),
-        relief=torch.where(has_lattice & t(granular), t(grain_relief(shaded_grains.cpu().numpy())).to(opacities.dtype),
-                           0.0),
         grains=has_lattice.to(opacities.dtype),
-        granular=(has_lattice & t(granular)).to(opacities.dtype),
-        porous=(has_lattice & t(porous)).to(opacities.dtype),
+        fine=FineStructure(*(t(a) for a in fine)),
         narrowing=torch.cat([narrowing, torch.ones(N, dtype=narrowing.dtype, device=device)]),
         fading=torch.cat([fading, torch.ones(N, dtype=fading.dtype, device=device)]),
         rest_pixels=project_points(to_camera(rest_means, camera.world_to_camera),
@@ -253,31 +245,23 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             F, means = t(trajectories.F[frame]), t(trajectories.positions[frame])
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
             covariances = undilated(means, covariances, particles.grains * particles.mixing.so_far, camera)
-            # the colour pass draws each flowing grain of sand or snow lit from above, a cap over its body,
-            # over the shadowed crevice under it, with its faces over it, and each grain of a torn solid with
-            # a pore in it
-            bodies, cap_means, cap_covariances, cap_opacities, cap_colors = lit_caps(
-                means, covariances, opacities, colors, particles.relief * particles.mixing.so_far, camera)
-            crevice_means, crevice_covariances, crevice_opacities, crevice_colors = crevices(
-                means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
-            pore_means, pore_covariances, pore_opacities, pore_colors = pores(
-                means, covariances, opacities, colors, particles.porous * particles.mixing.so_far, camera)
-            face_means, face_covariances, face_opacities, face_colors = facets(
-                means, covariances, opacities, colors, particles.granular * particles.mixing.so_far, camera)
-            extra_colors = torch.cat([cap_colors, crevice_colors, pore_colors, face_colors])
-            features = torch.cat([torch.cat([bodies, surface_weights[:, None].to(colors.dtype)], 1),
-                                  torch.nn.functional.pad(extra_colors, (0, 1))])
-            render = splat.rasterize(
-                torch.cat([means, cap_means, crevice_means, pore_means, face_means]),
-                torch.cat([opacities, cap_opacities, crevice_opacities, pore_opacities, face_opacities]), features,
-                camera, covariances=torch.cat([covariances, cap_covariances, crevice_covariances, pore_covariances,
-                                               face_covariances]))
+            features = torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1)
+            bodies = splat.rasterize(means, opacities, features, camera, covariances=covariances)
+            # Only the surface in front decides a pixel's source: what leaks through it from behind
+            # (the far side, which maps to elsewhere in the photograph) would scatter the map.
+            seen_now = visibility(bodies, means, covariances, camera)[:, None]
+            # the colour pass draws the grains of sand and snow and the pores of crumb on the flowing particles
+            # on the surface the frame shows (those further behind it lie under the grains in front)
+            showing = particles.mixing.so_far * (seen_now[:, 0] > 0.5).to(opacities.dtype)
+            fine_means, fine_covariances, fine_opacities, fine_colors = fine_features(
+                means, covariances, colors, showing, particles.fine, camera)
+            render = bodies if len(fine_means) == 0 else splat.rasterize(
+                torch.cat([means, fine_means]), torch.cat([opacities, fine_opacities]),
+                torch.cat([features, torch.nn.functional.pad(fine_colors, (0, 1))]), camera,
+                covariances=torch.cat([covariances, fine_covariances]))
             alpha = render.alpha
             rgb, surface_weight = render.features.split([3, 1], -1)
             covered = alpha >= MIN_ALPHA
-            # Only the surface in front decides a pixel's source: what leaks through it from behind
-            # (the far side, which maps to elsewhere in the photograph) would scatter the map.
-            seen_now = visibility(render, means, covariances, camera)[:, None]
             votes = seen_now.clamp_min(MIN_VOTE)
             F_inverse = inverse_deformation(F)
             normals = facing_normals(rest_normals, means, F_inverse, gaussians.world_to_camera)

@@ -5,14 +5,15 @@ its brightness (a crust's dark lines, its shaded side), every surfel coloured wi
 as a reconstruction averages them. It is filled as pm-simulate fills it, cut through by a plane turned
 towards the camera and its halves moved apart (test_render_interior.torn_in_two), at 8 px a lattice
 spacing, as the examples are drawn. The truth is the photograph's: the crumb is the material's lit colour,
-the mean of the photograph's brighter half (here exactly the lit colour), with pores in it at the
-particles' scale."""
+the mean of the photograph's brighter half (here exactly the lit colour), with pores in it at bread's scale,
+finer than the particles, as light as the light their cavities gather (interior.pore_shades)."""
+import cv2
 import numpy as np
 import pytest
 import torch
 
 import splat
-from stages.render.interior import CREVICE_SHADE, GRAIN_SIGMA, LUMA, crumb_colours
+from stages.render.interior import GRAIN_SIGMA, LUMA, PORE_OPENINGS, crumb_colours, pore_shades
 from stages.render.render import render_video
 
 from .test_render_flow import surfel_sphere
@@ -64,28 +65,47 @@ def test_crumb_colour_is_the_photograph_s_lit_half():
     np.testing.assert_array_equal(colours[1], colours[2])
 
 
+def luma_over_crumb(rgb: np.ndarray) -> np.ndarray:
+    """(H, W) each pixel's luma over the lit crumb's."""
+    return (rgb.astype(float) / 255) @ LUMA / (LIT @ LUMA)
+
+
+def matrix_colour(rgb: np.ndarray, opened: np.ndarray) -> np.ndarray:
+    """(3,) the torn faces' matrix: the median colour of their pixels at or above their median luma (the pores,
+    a third of a face with their soft edges, lie in the darker half)."""
+    luma = luma_over_crumb(rgb)
+    return np.median(rgb[opened & (luma >= np.median(luma[opened]))].astype(float), axis=0)
+
+
 def test_a_torn_face_shows_the_lit_crumb(torn):
-    """The torn faces' matrix (their median colour) is the crumb's lit colour within 4 levels, not the
-    surface's mean (0.8 of it: 20-50 levels darker)."""
+    """The torn faces' matrix is the crumb's lit colour within 4 levels, not the surface's mean (0.8 of it: 20-50
+    levels darker)."""
     coarse, opened = torn
     assert opened.sum() > 300
-    matrix = np.median(coarse.rgb[-1][opened].astype(float), axis=0)
+    matrix = matrix_colour(coarse.rgb[-1], opened)
     assert np.abs(matrix - 255 * LIT).max() <= 4, matrix
 
 
-def test_a_torn_face_has_sharp_pores(torn):
-    """Pores at the particles' scale, sharp: at least 5 % of a torn face is darker than 0.65 of the crumb's
-    luma (scikit-image's gravel, a broken material, has 10 % of its pixels there, decision 0037), at most a
-    third of it (the matrix holds), the darkest reach CREVICE_SHADE of it; and a pore's edge is a step:
-    of the steps between horizontal neighbours on the face, the largest 5 % are at least three times the
-    steepest slope (per pixel) of that contrast, 1 - CREVICE_SHADE, blurred by a lattice spacing's
-    GRAIN_SIGMA (a soft grain's), erf's 1 / (sigma sqrt(2 pi))."""
+def test_a_torn_face_has_bread_s_pores(torn):
+    """Bread's crumb, not a cookie's chips: the pores (4-connected spots under 0.9 of the crumb's luma) outnumber
+    the particles on the face (its area over a lattice spacing's square) and the median one is under a quarter
+    of a particle's picture (its grain's alpha-1/2 disc, radius 0.59 spacings); they take 5 % to a third of the
+    face at under 0.85 of its luma (the matrix holds); they are no darker than the deepest cavity of the lit
+    crumb (pore_shades at the least opening of PORE_OPENINGS; 95 % of the face above its luma, 0.05 spared
+    for the soft edges), and warmer than the matrix as light bouncing in a cavity of its colour is: over the
+    matrix, red keeps most, blue least (the pores' mean colour)."""
     coarse, opened = torn
-    luma = (coarse.rgb[-1].astype(float) / 255) @ LUMA / (LIT @ LUMA)
-    dark = float((luma[opened] < 0.65).mean())
+    rgb = coarse.rgb[-1]
+    luma = luma_over_crumb(rgb)
+    spacing_px = FOCAL * LATTICE_SPACING  # the sphere's centre is 1 m away
+    count, labels, stats, _ = cv2.connectedComponentsWithStats((opened & (luma < 0.9)).astype(np.uint8),
+                                                               connectivity=4)
+    assert count - 1 > opened.sum() / spacing_px ** 2, (count - 1, opened.sum() / spacing_px ** 2)
+    particle_px = np.pi * (GRAIN_SIGMA * np.sqrt(2 * np.log(2)) * spacing_px) ** 2
+    assert np.median(stats[1:, cv2.CC_STAT_AREA]) < particle_px / 4
+    dark = float((luma[opened] < 0.85).mean())
     assert 0.05 <= dark <= 1 / 3, dark
-    assert np.percentile(luma[opened], 1) <= CREVICE_SHADE + 0.05
-    sigma_px = GRAIN_SIGMA * FOCAL * LATTICE_SPACING  # the sphere's centre is 1 m away
-    blurred_slope = (1 - CREVICE_SHADE) / (sigma_px * np.sqrt(2 * np.pi))
-    steps = np.abs(np.diff(luma, axis=1))[opened[:, 1:] & opened[:, :-1]]
-    assert np.percentile(steps, 95) >= 3 * blurred_slope, (np.percentile(steps, 95), blurred_slope)
+    deepest = pore_shades(LIT[None], np.array([PORE_OPENINGS[0]]))[0] * LIT @ LUMA / (LIT @ LUMA)
+    assert np.percentile(luma[opened], 5) >= deepest - 0.05, (np.percentile(luma[opened], 5), deepest)
+    kept = rgb[opened & (luma < 0.85)].astype(float).mean(0) / matrix_colour(rgb, opened)
+    assert kept[0] > kept[1] > kept[2], kept

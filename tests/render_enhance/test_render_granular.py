@@ -10,7 +10,6 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from scipy.spatial import cKDTree
 
 import splat
 
@@ -20,11 +19,11 @@ from schemas.scene import PhysicsConfig
 from schemas.solid import solid_fields
 from stages.enhance.compositing import blend_over_background, unpremultiply
 from stages.enhance.flow import enhance_frames
-from stages.render.interior import (CREVICE_SHADE, EDGE_PX, FACET_RADIUS, FACETS, GRAIN_SHADE, crevices, facets,
-                                    grain_colours, grain_offsets, grain_relief, grain_shapes, lit_caps,
-                                    rest_ray_colours)
+from stages.render.interior import EDGE_PX, GRAIN_DIAMETER, grain_offsets, rest_ray_colours
 from stages.render.render import render_camera, render_video, rendered_particles
 from stages.simulate.simulation import Simulation
+
+from .test_render_grains import gravel_texture
 
 SIZE, FOCAL, RADIUS, LENGTH, DISTANCE = 96, 480.0, 0.06, 0.18, 1.0
 ORANGE, GREEN = np.array([0.95, 0.55, 0.15]), np.array([0.45, 0.75, 0.20])
@@ -137,73 +136,22 @@ def test_the_flow_backend_keeps_the_grains(heap):
     assert sharpness(enhanced) >= 0.6 * sharpness(drawn), f"{sharpness(enhanced):.0f} against {sharpness(drawn):.0f}"
 
 
-def test_a_grain_is_lit_from_above():
-    """A round grain of sand alone, its cap drawn over it (lit_caps), seen from the side, against a sphere
-    of shading 1 + k y, k its relief (grain_relief) and y the height over its disc in radii: over its cap's
-    picture and over the rest of its picture, its brightness over its colour's is the sphere's shading
-    averaged over those pixels (within 0.02: the cap's edge is antialiased over a few pixels), and over
-    the whole grain 1 (within 2 %: it keeps its colour).
-    A white grain (snow) has no relief: no cap, colour unchanged."""
-    colour = np.array([[0.3, 0.45, 0.2]])
-    relief = grain_relief(colour)
-    albedo = colour[0] @ [0.299, 0.587, 0.114]
-    assert relief[0] == pytest.approx((1 - albedo) / (1 + albedo))
-    np.testing.assert_array_equal(grain_relief(np.ones((1, 3))), 0.0)
-    size, focal, spacing = 201, 2000.0, 0.03
-    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
-    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
-    shape = np.eye(3) * np.cbrt(np.linalg.det(shape[0]))  # a round grain, as the sphere
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape[None]), t(opacity), t(colour)
-    body, cap_means, cap_covariances, cap_opacities, cap_colours = lit_caps(means, covariances, opacities, colours,
-                                                                            t(relief), camera)
-    grain = splat.rasterize(torch.cat([means, cap_means]), torch.cat([opacities, cap_opacities]),
-                            torch.cat([body, cap_colours]), camera, covariances=torch.cat([covariances, cap_covariances]))
-    cap = splat.rasterize(cap_means, cap_opacities, torch.ones(1, 1), camera, covariances=cap_covariances).alpha.numpy()
-    brightness = grain.features.numpy() @ [0.299, 0.587, 0.114] / grain.alpha.numpy().clip(1e-6) / albedo
-    alone = splat.rasterize(means, opacities, torch.ones(1, 1), camera, covariances=covariances).alpha.numpy() > 0.5
-    rows = np.nonzero(alone.any(1))[0]
-    centre, radius = (rows[0] + rows[-1] + 1) / 2, (rows[-1] + 1 - rows[0]) / 2
-    sphere = 1 + relief[0] * (centre - np.arange(size)[:, None] - 0.5) / radius * np.ones(size)
-    for part in (alone & (cap > 0.5), alone & (cap <= 0.5)):
-        assert part.sum() > 100
-        assert abs(brightness[part].mean() - sphere[part].mean()) < 0.02
-    assert abs(brightness[alone].mean() - 1) < 0.02
-    unlit = lit_caps(means, covariances, opacities, colours, torch.zeros(1), camera)
-    np.testing.assert_array_equal(unlit[0].numpy(), colour.astype(np.float32))
-    assert len(unlit[1]) == 0
-
-
-def test_grains_are_the_size_of_the_lattice(heap):
-    """The heap reads as grains of the particle spacing, not as discs many grains wide: of its pixels
-    of one flat colour (4-connected, within 1/255 of a neighbour's), 95 % lie in patches of at most
-    twice the picture of a disc one spacing across; and the grains vary in brightness."""
-    _, trajectories, coarse = heap
-    fill = trajectories.rest_positions[~trajectories.is_gaussian].astype(np.float64)
-    spacing = float(np.median(cKDTree(fill).query(fill, k=2)[0][:, 1]))
-    grain_px = np.pi * (spacing / 2 * FOCAL / DISTANCE) ** 2
-    rgb, solid = coarse.rgb[-1].astype(np.int16), coarse.alpha[-1] > 0.99
-    same = lambda a, b: (np.abs(a - b).max(-1) <= 1)  # noqa: E731
-    # flat patches: pixels joined to a right or lower neighbour of the same colour
-    right = same(rgb[:, 1:], rgb[:, :-1]) & solid[:, 1:] & solid[:, :-1]
-    down = same(rgb[1:], rgb[:-1]) & solid[1:] & solid[:-1]
-    edges = [(r * SIZE + c, r * SIZE + c + 1) for r, c in zip(*np.nonzero(right))]
-    edges += [(r * SIZE + c, (r + 1) * SIZE + c) for r, c in zip(*np.nonzero(down))]
-    parent = np.arange(SIZE * SIZE)
-
-    def root(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-    for a, b in edges:
-        parent[root(a)] = root(b)
-    labels = np.array([root(i) for i in range(SIZE * SIZE)]).reshape(SIZE, SIZE)
-    sizes = np.bincount(labels[solid].ravel())
-    pixels_in = np.sort(sizes[labels[solid]])
-    assert pixels_in[int(0.95 * len(pixels_in))] <= 2 * grain_px, f"{grain_px:.0f} px a grain"
-    brightness = cv2.cvtColor(coarse.rgb[-1], cv2.COLOR_RGB2GRAY)[solid].astype(float)
-    assert brightness.std() > 0.3 * GRAIN_SHADE * brightness.mean()
+def test_the_heap_is_grains_of_sand_not_of_the_lattice(heap):
+    """The heap reads as sand, grains finer than its particles: inside each colour's part (alpha > 0.5, 4 px from
+    its edges), its brightness spreads about its 2 px mean as scikit-image's gravel photograph's does where a
+    pixel spans as many grains of GRAIN_DIAMETER (test_render_grains.gravel_texture), within a factor 1.5 either
+    way. A heap of lattice-sized grains spreads 2.7 times the gravel's (8 px grains a spacing across, each
+    shaded on its own)."""
+    _, _, coarse = heap
+    rgb, alpha = coarse.rgb[-1].astype(float), coarse.alpha[-1]
+    luma = rgb @ [0.299, 0.587, 0.114]
+    ratio = luma / np.maximum(cv2.GaussianBlur(luma, (0, 0), 2.0), 1e-6)
+    chroma = rgb / rgb.sum(-1, keepdims=True).clip(1e-6)
+    truth = gravel_texture(DISTANCE / FOCAL / GRAIN_DIAMETER)
+    for part in (chroma[..., 0] > chroma[..., 1], chroma[..., 0] <= chroma[..., 1]):
+        inside = cv2.erode(((alpha > 0.5) & part).astype(np.uint8), np.ones((9, 9), np.uint8)) > 0
+        assert inside.sum() > 300
+        assert 1 / 1.5 < ratio[inside].std() / truth < 1.5, (ratio[inside].std(), truth)
 
 
 def test_rest_ray_colour_is_the_photograph_where_the_point_projects():
@@ -227,19 +175,6 @@ def test_rest_ray_colour_is_the_photograph_where_the_point_projects():
         assert tuple(np.round(colour * 255).astype(int)) in allowed
 
 
-def test_grain_shades_keep_the_hue():
-    """Every grain's colour is its colour times one factor (the hue kept), at most 1 in every channel,
-    and the factors spread by about GRAIN_SHADE where no channel caps them."""
-    rng = np.random.default_rng(2)
-    colours = rng.uniform(0.05, 1.0, (4000, 3))
-    shaded = grain_colours(colours)
-    factor = shaded / colours
-    np.testing.assert_allclose(factor, factor[:, :1].repeat(3, 1), rtol=1e-9)
-    assert shaded.max() <= 1 + 1e-12
-    dark = colours.max(1) < 0.6  # no cap within the factors' +-2 GRAIN_SHADE
-    assert abs(factor[dark, 0].std() / GRAIN_SHADE - 1) < 0.15
-
-
 def test_grains_show_no_lattice():
     """Grains drawn from a cubic lattice of sand particles (spacing s) by grain_offsets lie anywhere in
     their cells: the structure factor of their centres, |sum exp(i k x)|^2 / N, at the lattice's
@@ -256,76 +191,3 @@ def test_grains_show_no_lattice():
         assert peak(lattice) > 0.99 * len(lattice)
         assert peak(lattice + offsets) < 15, f"a lattice peak along {direction}"
     np.testing.assert_array_equal(grain_offsets(np.full(8, np.inf)), 0.0)
-
-
-def test_a_grain_shades_the_gap_under_it():
-    """A grain of sand alone, seen from the side, drawn with its crevice (crevices): the crevice is the
-    grain's shape in the grain's colour times CREVICE_SHADE (the hue kept), composited behind the grain
-    (each pixel: the grain's alpha a1 times its colour plus (1 - a1) times the crevice's alpha a2 times
-    its colour, each rendered alone), and where it shows past the grain (the grain's alpha under 1/2, the
-    crevice's over 1/2) it lies under the grain, in the grain's own columns. A grain just under it at its
-    depth covers its crevice (the crevice sorts behind both). A grain whose material holds its shape
-    (weight 0) has none."""
-    colour = np.array([[0.8, 0.5, 0.2]])
-    size, focal, spacing = 201, 2000.0, 0.03
-    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
-    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape), t(opacity), t(colour)
-    crevice = crevices(means, covariances, opacities, colours, t([1.0]), camera)
-    np.testing.assert_allclose(crevice[3].numpy(), CREVICE_SHADE * colour, rtol=1e-6)
-    alpha = lambda m, c, o: splat.rasterize(m, o, torch.ones(len(m), 1), camera,  # noqa: E731
-                                            covariances=c).alpha.numpy()[..., None]
-    a1, a2 = alpha(means, covariances, opacities), alpha(crevice[0], crevice[1], crevice[2])
-    both = splat.rasterize(torch.cat([means, crevice[0]]), torch.cat([opacities, crevice[2]]),
-                           torch.cat([colours, crevice[3]]), camera, covariances=torch.cat([covariances, crevice[1]]))
-    np.testing.assert_allclose(both.features.numpy(), a1 * colour + (1 - a1) * a2 * CREVICE_SHADE * colour,
-                               atol=0.01)
-    rows, cols = np.nonzero((a2[..., 0] > 0.5) & (a1[..., 0] < 0.5))
-    grain_rows = np.where(a1[..., 0] > 0.5, np.arange(size)[:, None], -1)
-    assert len(rows) > 20
-    assert (rows > grain_rows.max(0)[cols]).all() and (grain_rows.max(0)[cols] >= 0).all()  # rows grow downwards
-    # a grain just under it at the same depth, drawn with its own crevice, covers the first one's crevice
-    pair = torch.cat([means, means + t([[0.0, 0.6 * spacing, 0.0]])])
-    crevice = crevices(pair, covariances.repeat(2, 1, 1), opacities.repeat(2), colours.repeat(2, 1), t([1.0, 1.0]),
-                       camera)
-    two = splat.rasterize(torch.cat([pair, crevice[0]]), torch.cat([opacities.repeat(2), crevice[2]]),
-                          torch.cat([colours.repeat(2, 1), crevice[3]]), camera,
-                          covariances=torch.cat([covariances.repeat(2, 1, 1), crevice[1]]))
-    lower = alpha(pair[1:], covariances, opacities)[..., 0] > 0.98
-    assert lower.sum() > 100
-    np.testing.assert_allclose(two.features.numpy()[lower], 0.99 * np.tile(colour, (lower.sum(), 1)), atol=0.01)
-    assert len(crevices(means, covariances, opacities, colours, t([0.0]), camera)[0]) == 0
-
-
-def test_a_grain_shows_its_faces():
-    """A grain of sand alone, face-on, drawn with its faces (facets): each face is the grain's shape times
-    FACET_RADIUS, in the grain's colour times one factor (the hue kept, at most 1); its picture (alpha >= 1/2)
-    reaches past the grain's own ellipse (float64: x^T C^-1 x <= 2 ln(2 opacity) on the image plane), its
-    outline no longer an ellipse; at least a fifth of the grain's own picture shows a face's shade, not the
-    grain's colour (more than 2 levels off). A grain whose material holds its shape (weight 0) has none."""
-    colour = np.array([[0.8, 0.5, 0.2]])
-    size, focal, spacing = 201, 2000.0, 0.03
-    camera = splat.Camera(np.array([[focal, 0, size / 2], [0, focal, size / 2], [0, 0, 1]]), np.eye(4), size, size)
-    t = lambda a: torch.as_tensor(a, dtype=torch.float32)  # noqa: E731
-    shape, opacity = grain_shapes(np.full(1, spacing), np.ones(1, bool))
-    means, covariances, opacities, colours = t([[0.0, 0.0, 1.0]]), t(shape), t(opacity), t(colour)
-    face_means, face_covariances, face_opacities, face_colours = facets(means, covariances, opacities, colours,
-                                                                        t([1.0]), camera)
-    assert len(face_means) == FACETS
-    np.testing.assert_allclose(face_covariances.numpy(), FACET_RADIUS ** 2 * np.repeat(shape, FACETS, 0), rtol=1e-5)
-    factor = face_colours.numpy() / colour
-    np.testing.assert_allclose(factor, factor[:, :1].repeat(3, 1), rtol=1e-5)
-    assert face_colours.numpy().max() <= 1 + 1e-6
-    drawn = splat.rasterize(torch.cat([means, face_means]), torch.cat([opacities, face_opacities]),
-                            torch.cat([colours, face_colours]), camera,
-                            covariances=torch.cat([covariances, face_covariances]))
-    rows, cols = np.mgrid[0:size, 0:size] + 0.5 - size / 2
-    pixels = np.stack([cols, rows], -1)
-    ellipse = np.einsum("...i,ij,...j->...", pixels, np.linalg.inv(shape[0][:2, :2] * focal ** 2), pixels) <= (
-        2 * np.log(2 * opacity[0]))
-    solid = drawn.alpha.numpy() >= 0.5
-    assert (solid & ~ellipse).sum() > 0.02 * ellipse.sum()
-    off = np.abs(drawn.features.numpy() * 255 - 0.99 * colour * 255).max(-1) > 2
-    assert off[ellipse].mean() >= 0.2
-    assert len(facets(means, covariances, opacities, colours, t([0.0]), camera)[0]) == 0
