@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import warp as wp
+from scipy.spatial import cKDTree
 
 from .constitutive import (SNOW_HARDENING_GROWTH, SNOW_HARDENING_MAX, initial_history, params_array, snow_hardening,
                            update_stress)
@@ -73,6 +74,21 @@ class Ground:
     height: float | None = None  # None: node plane BOUNDARY_NODES of the grid the solver starts on
 
 
+@wp.func
+def stencil_fields(cracks: Cracks, base: wp.vec3i, gradient: wp.vec3):
+    """Bit 9 i + 3 j + k: the field (crack_fields.crack_field) in which a particle of damage gradient
+    `gradient` meets node (i, j, k) of its stencil (corner node `base`)."""
+    bits = int(0)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
+                field = crack_field(cracks.node_max_damage[node[0], node[1], node[2]],
+                                    cracks.node_direction[node[0], node[1], node[2]], gradient)
+                bits = bits | (field << (9 * i + 3 * j + k))
+    return bits
+
+
 def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
     """P2G compiled for n_fields (1, or 2 where a body can tear, crack_fields.py) velocity fields per
     node: the one-field kernel, every scene without fracture, carries no per-node crack test."""
@@ -86,6 +102,11 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         copy part * n_fields + field of grid.momentum_mass. With two fields (crack_fields.py) the field
         of each of the 27 nodes is bit 9 i + 3 j + k of cracks.field_bits[p], which G2P reads back.
         Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
+
+        A massless particle (a Gaussian riding on its body's solid) has no volume either, so it scatters
+        nothing: it meets the nodes on its anchor's side of a crack, and takes its anchor's velocity,
+        which G2P keeps where no node of its stencil carries mass (gather_massless), so that a piece
+        torn or flung from its body carries its Gaussians along.
         """
         p = wp.tid() + start
         if particles.free[p] == 1:
@@ -96,15 +117,29 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         dt = substep.dt
         inv_dx = 1.0 / dx
         base, fx = stencil_base(particles.x[p], grid.origin, inv_dx, grid.shape)
-        weights = stencil_weights(fx)
         m = particles.mass[p]
+        if m <= 0.0:
+            # its anchor carries mass: no other thread writes the anchor's v, nor this particle's
+            anchor = particles.anchor[p]
+            if anchor >= 0:
+                particles.v[p] = particles.v[anchor]
+            if wp.static(n_fields == 2):
+                side = p
+                if anchor >= 0:
+                    side = anchor
+                cracks.field_bits[p] = stencil_fields(cracks, base, cracks.gradient[side])
+            return
+        bits = int(0)
+        if wp.static(n_fields == 2):
+            bits = stencil_fields(cracks, base, cracks.gradient[p])
+            cracks.field_bits[p] = bits
+        weights = stencil_weights(fx)
         # MLS-MPM: the stress force enters as an affine term, -dt V tau M^-1 with M^-1 = 4 / dx^2
         affine = m * particles.C[p] - (4.0 * dt * inv_dx * inv_dx) * particles.volume_stress[p]
         # x_i - x_p = dx ((i, j, k) - fx), so the node momentum is linear in (i, j, k): start from the
         # stencil corner and add one column of dx A_p per node step along each axis (3 adds, not a mat-vec)
         step = wp.transpose(dx * affine)  # row a: momentum change per node step along axis a
         corner = m * particles.v[p] + dt * particles.force[p] - dx * (affine * fx)
-        bits = int(0)
         for i in range(3):
             momentum_i = corner + float(i) * step[0]
             for j in range(3):
@@ -115,15 +150,10 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
                     w = w_ij * weights[2, k]
                     field = int(0)
                     if wp.static(n_fields == 2):
-                        node = wp.vec3i(base[0] + i, base[1] + j, base[2] + k)
-                        field = crack_field(cracks.node_max_damage[node[0], node[1], node[2]],
-                                            cracks.node_direction[node[0], node[1], node[2]], cracks.gradient[p])
-                        bits = bits | (field << (9 * i + 3 * j + k))
+                        field = (bits >> (9 * i + 3 * j + k)) & 1
                     copy = part * wp.static(n_fields) + field
                     wp.atomic_add(grid.momentum_mass, copy, base[0] + i, base[1] + j, base[2] + k,
                                   w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
-        if wp.static(n_fields == 2):
-            cracks.field_bits[p] = bits
 
     return particle_to_grid
 
@@ -275,7 +305,7 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         Gaussians. The fit's moment matrix is that of the nodes with mass about their centre, plus
         REGULARISATION of the whole stencil's, so it stays invertible (and C bounded) where those nodes
         lie in a plane; on a whole stencil the fit is APIC's. v_p is the nodes' weighted mean velocity;
-        `fallback` (its own velocity) and C = 0 where no node about it carries mass.
+        `fallback` (its anchor's velocity, particle_to_grid) and C = 0 where no node about it carries mass.
         """
         weight = float(0.0)
         v_sum = wp.vec3(0.0)
@@ -471,6 +501,7 @@ class MPMSolver:
         self.prescribed_velocity = wp.zeros(n, dtype=wp.vec3, device=device)
         self.free = wp.zeros(n, dtype=wp.int32, device=device)
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
+        self.anchor = wp.array(anchors(positions, masses, object_id), dtype=wp.int32, device=device)
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
         # per snow object (its index, its material), where the substep follows its hardening
@@ -675,6 +706,19 @@ class MPMSolver:
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+
+
+def anchors(positions: np.ndarray, masses: np.ndarray, object_id: np.ndarray) -> np.ndarray:
+    """(P,) int32: for each massless particle the nearest particle with mass of its object at `positions`
+    (P,3) m, -1 for the particles with mass and where its object has none (masses (P,) kg, object_id (P,))."""
+    masses, object_id = np.asarray(masses), np.asarray(object_id)
+    out = np.full(len(masses), -1, np.int32)
+    for k in np.unique(object_id):
+        massive = np.flatnonzero((object_id == k) & (masses > 0))
+        massless = np.flatnonzero((object_id == k) & (masses <= 0))
+        if len(massive) and len(massless):
+            out[massless] = massive[cKDTree(positions[massive]).query(positions[massless])[1]]
+    return out
 
 
 def _split(n: int, parts: int, first: int = 0) -> list[tuple[int, int]]:

@@ -28,6 +28,8 @@ class Particles:
     prescribed_velocity: wp.array(dtype=wp.vec3)  # (P,) that velocity, m/s
     free: wp.array(dtype=wp.int32)  # (P,) 0 on the grid, 1 off it (free flight), 2 rejoining at the next P2G
     own_ground: wp.array(dtype=wp.int32)  # (P,) 1 for bodies that meet the ground as a whole (rigid.py)
+    anchor: wp.array(dtype=wp.int32)  # (P,) a massless particle's nearest massive one of its object at rest
+    # (mpm.anchors), whose crack side and velocity it takes; -1 for the others
 
 
 @wp.struct
