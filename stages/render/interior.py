@@ -372,39 +372,53 @@ def fine_structure(granular: np.ndarray, porous: np.ndarray, covariances: np.nda
 
 
 def fine_features(means: torch.Tensor, covariances: torch.Tensor, colours: torch.Tensor, weight: torch.Tensor,
-                  fine: FineStructure, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
+                  fine: FineStructure, front: torch.Tensor, camera: splat.Camera) -> tuple[torch.Tensor, ...]:
     """The grains and pores (fine_structure, its fields as tensors) of the particles whose ``weight`` (P,) in
-    [0, 1] is above 0 (how far their material flows, where the frame shows them), drawn over them: (C, 3) means
-    (m), (C, 3, 3) covariances (m^2), (C,) opacities (the weight) and (C, 3) colours.
+    [0, 1] is at least 1/255 (how far their material flows, where the frame shows them), drawn on the surface
+    the frame shows: (C, 3) means (m), (C, 3, 3) covariances (m^2), (C,) opacities (the weight) and (C, 3)
+    colours.
 
     Of each particle (means (P, 3), covariances (P, 3, 3), colours (P, 3) in [0, 1], as drawn this frame), a
-    grain or pore lies at its ``place`` in the particle's alpha-1/2 ellipse as the camera's axes see it, moved
-    across the particle's ray (so that its distance is the particle's) and brought a twentieth of the
-    particle's reach nearer the camera, so that it sorts in front of its own particle and behind the ones
-    in front. Its colour is the particle's times its factor, no channel past 1 (a brighter grain keeps its
-    hue)."""
-    drawn = torch.nonzero(weight[fine.owner] > 0)[:, 0]
+    grain or pore lies at its ``place`` in the particle's alpha-1/2 ellipse as the camera's axes see it, across
+    the particle's ray. Where the particles cover that pixel (``front`` (H, W), the camera depth z, m, of what
+    their render shows there, alpha-weighted; NaN where their alpha is at most 1/2), it is texture of the
+    surface there: drawn only if its particle lies within its own reach along the view of that depth, and moved
+    along its ray to a twentieth of that reach in front of it, so that neither its own particle nor a
+    neighbour at the surface covers it (splat sorts by camera depth); elsewhere (a grain spilled past a heap's
+    edge) it stays at its particle's depth. Its colour is the particle's times its factor, no channel past 1
+    (a brighter grain keeps its hue)."""
+    drawn = torch.nonzero(weight[fine.owner] >= 1 / 255)[:, 0]
     owner = fine.owner[drawn]
     grain = covariances[owner]
-    to_camera_R = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
-    axes = to_camera_R[:2, :3]  # the picture's right and down, world frame
-    eye = -to_camera_R[:3, :3].T @ to_camera_R[:3, 3]
-    view = means[owner] - eye
-    view = view / view.norm(dim=1, keepdim=True).clamp_min(1e-12)
+    world_to_camera = torch.as_tensor(camera.world_to_camera, dtype=means.dtype, device=means.device)
+    axes = world_to_camera[:2, :3]  # the picture's right and down, world frame
+    centre = to_camera(means[owner], world_to_camera)
+    view = centre / centre.norm(dim=1, keepdim=True).clamp_min(1e-12)  # camera frame
     across = axes @ grain @ axes.T  # (C, 2, 2) the particle's picture, m^2
     a, b, c = across[:, 0, 0].clamp_min(0).sqrt(), across[:, 1, 0], across[:, 1, 1]
     lower = torch.where(a > 0, b / a.clamp_min(1e-30), 0.0)
     root = torch.stack([torch.stack([a, torch.zeros_like(a)], 1),
                         torch.stack([lower, (c - lower ** 2).clamp_min(0).sqrt()], 1)], 1)
     place = fine.place[drawn].to(means.dtype)
-    offset = GRAIN_EDGE_SIGMAS * (root @ place[:, :, None])[..., 0] @ axes
-    offset = offset - (offset * view).sum(1, keepdim=True) * view
-    reach_view = GRAIN_EDGE_SIGMAS * torch.einsum("pi,pij,pj->p", view, grain, view).clamp_min(0).sqrt()
+    offset = torch.nn.functional.pad(GRAIN_EDGE_SIGMAS * (root @ place[:, :, None])[..., 0], (0, 1))
+    point = centre + offset - (offset * view).sum(1, keepdim=True) * view
+    reach_view = GRAIN_EDGE_SIGMAS * torch.einsum("pi,pij,pj->p", view @ world_to_camera[:3, :3], grain,
+                                                  view @ world_to_camera[:3, :3]).clamp_min(0).sqrt()
+    uv = project_points(point, torch.as_tensor(camera.K, dtype=means.dtype, device=means.device))
+    col, row = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+    inside = (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height)
+    surface = torch.where(inside, front[row.clamp(0, camera.height - 1), col.clamp(0, camera.width - 1)].to(
+        means.dtype), torch.nan)
+    covered = surface.isfinite()
+    kept = ~covered | (centre[:, 2] - surface <= reach_view)
+    depth = torch.where(covered, surface, centre[:, 2]) - 0.05 * reach_view
+    point = point * (depth / point[:, 2].clamp_min(1e-12))[:, None]
+    R, t = world_to_camera[:3, :3], world_to_camera[:3, 3]
     sigma, factor = fine.sigma[drawn].to(grain.dtype), fine.factor[drawn].to(colours.dtype)
     colour = colours[owner] * factor
-    return (means[owner] + offset - (0.05 * reach_view)[:, None] * view,
-            sigma[:, None, None] ** 2 * torch.eye(3, dtype=grain.dtype, device=grain.device),
-            weight[owner] * INTERIOR_OPACITY, colour / colour.amax(1, keepdim=True).clamp_min(1))
+    return (((point - t) @ R)[kept], (sigma[:, None, None] ** 2 * torch.eye(3, dtype=grain.dtype,
+                                                                          device=grain.device))[kept],
+            (weight[owner] * INTERIOR_OPACITY)[kept], (colour / colour.amax(1, keepdim=True).clamp_min(1))[kept])
 
 
 def undilated(means: torch.Tensor, covariances: torch.Tensor, hard: torch.Tensor, camera: splat.Camera) -> torch.Tensor:

@@ -246,21 +246,24 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
             means, covariances, opacities, colors, surface_weights = particles.at(F, means)
             covariances = undilated(means, covariances, particles.grains * particles.mixing.so_far, camera)
             features = torch.cat([colors, surface_weights[:, None].to(colors.dtype)], 1)
-            bodies = splat.rasterize(means, opacities, features, camera, covariances=covariances)
+            camera_z = to_camera(means, camera.world_to_camera)[:, 2:].to(colors.dtype)
+            bodies = splat.rasterize(means, opacities, torch.cat([features, camera_z], 1), camera,
+                                     covariances=covariances)
             # Only the surface in front decides a pixel's source: what leaks through it from behind
             # (the far side, which maps to elsewhere in the photograph) would scatter the map.
             seen_now = visibility(bodies, means, covariances, camera)[:, None]
             # the colour pass draws the grains of sand and snow and the pores of crumb on the flowing particles
             # on the surface the frame shows (those further behind it lie under the grains in front)
             showing = particles.mixing.so_far * (seen_now[:, 0] > 0.5).to(opacities.dtype)
+            front = torch.where(bodies.alpha > 0.5, bodies.features[..., 4] / bodies.alpha.clamp_min(0.5), torch.nan)
             fine_means, fine_covariances, fine_opacities, fine_colors = fine_features(
-                means, covariances, colors, showing, particles.fine, camera)
+                means, covariances, colors, showing, particles.fine, front, camera)
             render = bodies if len(fine_means) == 0 else splat.rasterize(
                 torch.cat([means, fine_means]), torch.cat([opacities, fine_opacities]),
                 torch.cat([features, torch.nn.functional.pad(fine_colors, (0, 1))]), camera,
                 covariances=torch.cat([covariances, fine_covariances]))
             alpha = render.alpha
-            rgb, surface_weight = render.features.split([3, 1], -1)
+            rgb, surface_weight = render.features[..., :4].split([3, 1], -1)  # the bodies' camera z after
             covered = alpha >= MIN_ALPHA
             votes = seen_now.clamp_min(MIN_VOTE)
             F_inverse = inverse_deformation(F)

@@ -51,8 +51,10 @@ def sand_layer(grains_a_pixel: float) -> tuple[np.ndarray, FineStructure]:
     t = torch.as_tensor
     means = t(points + grain_offsets(spacing))
     covariances = undilated(means, t(shape), torch.ones(P, dtype=torch.float64), camera)
+    bodies = splat.rasterize(means, t(opacity), means[:, 2:], camera, covariances=covariances)
+    front = torch.where(bodies.alpha > 0.5, bodies.features[..., 0] / bodies.alpha, torch.nan)
     grains = fine_features(means, covariances, t(colours), torch.ones(P, dtype=torch.float64),
-                           FineStructure(*(t(a) for a in fine)), camera)
+                           FineStructure(*(t(a) for a in fine)), front, camera)
     drawn = splat.rasterize(torch.cat([means, grains[0]]), torch.cat([t(opacity), grains[2]]),
                             torch.cat([t(colours), grains[3]]), camera, covariances=torch.cat([covariances, grains[1]]))
     return drawn.features.numpy() @ LUMA, fine
