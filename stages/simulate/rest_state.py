@@ -173,6 +173,23 @@ def warn_crushed_by_weight(k: int, material, height: float, gravity: float) -> N
                     "make size_m smaller", k, material.preset, 1e3 * height, pressure, yield_stress, k, pressure)
 
 
+def warn_dented_by_impact(k: int, material, speed: float) -> None:
+    """Say so when metal object k, moving at `speed` m/s as its conditions set it, would meet the ground or
+    what it strikes with an impact stress sqrt(E rho) v (a bar's elastic wave stopping it) past its
+    yield stress: it dents and flattens where it lands instead of bouncing as a stiff metal does."""
+    if material.preset != "metal" or speed <= 0:
+        return
+    stress = math.sqrt(material.youngs_modulus * material.density) * speed
+    if stress <= material.yield_stress:
+        return
+    log.warning("object %d (metal, E = %.3g Pa) moves at up to %.2g m/s: meeting the ground at that speed "
+                "stresses it about sqrt(E rho) v = %.3g Pa, above its yield_stress %.3g Pa, so it dents and "
+                "flattens where it lands, as soft metal would. To keep its shape raise "
+                "objects[%d].material.yield_stress above %.3g Pa (a stiffer youngs_modulus raises the impact "
+                "stress as sqrt(E) and shortens the substep as much)", k, material.youngs_modulus, speed, stress,
+                material.yield_stress, k, stress)
+
+
 def warn_unsupported(k: int, x: np.ndarray, centre: np.ndarray, ground_y: float, spacing: float) -> None:
     """Say so when no support holds object k (rest points x (N,3), centre of mass (3,), simulation frame, m)
     up: its centre of mass lies outside the hull of its points within a lattice `spacing` of the ground

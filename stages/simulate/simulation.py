@@ -97,10 +97,12 @@ class Simulation:
         self.gravity_world = domain.world_gravity(physics.gravity, pitch_deg)
         self.Q = domain.simulation_rotation(domain.down_direction(self.gravity_world, pitch_deg))
         self.gravity_frame = domain.gravity_frame(self.Q)
-        velocities = np.array([domain.condition_frame(c, self.gravity_frame).T @ np.asarray(c.velocity)
-                               for c in physics.conditions if c.type in ("impulse", "velocity")],
-                              dtype=np.float64).reshape(-1, 3)  # world frame
-        self.speed_hint = float(np.max(np.linalg.norm(velocities, axis=1), initial=0.0))
+        moving = [c for c in physics.conditions if c.type in ("impulse", "velocity")]
+        speeds = np.array([np.linalg.norm(c.velocity) for c in moving], dtype=np.float64)  # m/s, in any frame
+        self.speed_hint = float(np.max(speeds, initial=0.0))
+        # m/s, per object: the fastest its own conditions set it moving
+        self._object_speeds = [float(np.max(speeds[[c.object == k for c in moving]], initial=0.0))
+                               for k in range(len(self.materials))]
         ground = physics.ground
 
         # the cell size comes from the Gaussians, the one grid is laid over the whole solid they fill
@@ -233,8 +235,17 @@ class Simulation:
         if cause == "physics.gravity":
             return ("give physics.gravity a magnitude nearer 9.81 m/s^2 (a frame of free fall sets the substep), "
                     "or raise physics.max_substeps_per_frame if you mean it")
-        return ("lower that youngs_modulus or raise its density (the elastic wave speed sqrt(E / density) sets "
-                "the substep), lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
+        material = self.materials[int(cause.split("[")[1].split("]")[0])]
+        # a substep is CFL dx / (wave + other speeds) and the wave grows as sqrt(E): the largest E whose wave
+        # fits the limit's substep beside the same other speeds, with a twentieth to spare
+        wave = wave_speed(material, self.solver.stiffening)
+        others = domain.CFL * self.grid.dx / self.substep_size(0.0) - wave
+        longest_wave = self.physics.max_substeps_per_frame * self.physics.fps * domain.CFL * self.grid.dx
+        fitting_wave = 0.95 * longest_wave - others
+        fitting = material.youngs_modulus * (fitting_wave / wave) ** 2
+        return (f"lower that youngs_modulus to {float(f'{fitting:.1e}'):.1e} Pa or less, or raise its density "
+                "(the elastic wave speed sqrt(E / density) sets the substep), lower physics.grid, or raise "
+                "physics.max_substeps_per_frame if you mean it")
 
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
         """Each object's mass, volume and principal moments of inertia about its centre of mass; and the
@@ -249,6 +260,7 @@ class Simulation:
             log.info("object %d (%s): mass %.4g kg, volume %.4g m^3, principal moments %s kg m^2", k,
                      material.preset, m.sum(), self.volumes[sel].sum(), ", ".join(f"{i:.3g}" for i in moments))
             rest_state.warn_crushed_by_weight(k, material, float(np.ptp(x[:, 1])), g)
+            rest_state.warn_dented_by_impact(k, material, self._object_speeds[k])
             if self.ground_y is not None:
                 rest_state.warn_unsupported(k, x, centre, self.ground_y, self.spacing)
 

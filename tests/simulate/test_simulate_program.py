@@ -398,3 +398,28 @@ def test_the_turn_of_a_blown_up_settle_is_nan_not_an_svd_failure():
     x = np.random.default_rng(0).random((20, 3))
     assert math.isnan(rest_state.turn_deg(x, np.full_like(x, np.nan), np.ones(20)))
     assert rest_state.turn_deg(x, x, np.ones(20)) == pytest.approx(0.0, abs=1e-5)
+
+
+def test_a_youngs_modulus_too_stiff_to_afford_is_refused_with_one_that_runs(tmp_path):
+    """Metal of real steel's E = 2e11 Pa asks for more substeps per frame than the limit: refused up front,
+    naming a youngs_modulus; a scene at that value passes the same budget and runs (the refusal said only
+    "lower that youngs_modulus")."""
+    physics = "physics: {duration_s: 0.1, fps: 10, grid: 12, max_substeps_per_frame: 400}\n"
+    steel = JELLY.replace("preset: jelly", "preset: metal, youngs_modulus: 2.0e11, density: 7800")
+    err = refused(*program(tmp_path, steel + physics), "objects[0].material.youngs_modulus")
+    offered = re.search(r"youngs_modulus to ([0-9.e+]+) Pa or less", err).group(1)
+    assert float(offered) < 2.0e11
+    code, err = program(tmp_path, steel.replace("2.0e11", offered) + physics)
+    assert code == 0, err
+
+
+@pytest.mark.parametrize("speed, dented", [(0.2, False), (2.0, True)])
+def test_metal_tossed_faster_than_its_yield_allows_is_said_to_dent(tmp_path, caplog, speed, dented):
+    """The metal preset (E = 1e6 Pa, 3000 kg/m^3, yield 1.5e4 Pa) meets the ground with an impact stress
+    sqrt(E rho) v: 1.1e4 Pa at 0.2 m/s stays elastic, 1.1e5 Pa at 2 m/s yields, and the log says which."""
+    caplog.set_level(logging.INFO, logger="physmotion")
+    toss = f"  conditions: [{{type: impulse, velocity: [0, -{speed}, 0]}}]\n"
+    code, err = program(tmp_path, JELLY.replace("preset: jelly", "preset: metal")
+                        + "physics:\n  duration_s: 0.1\n  fps: 10\n  grid: 12\n" + toss)
+    assert code == 0, err
+    assert any("dents and flattens" in m for m in warnings_of(caplog)) == dented, warnings_of(caplog)
