@@ -104,9 +104,8 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
 
         A massless particle (a Gaussian riding on its body's solid) has no volume either, so it scatters
-        nothing: it meets the nodes on its anchor's side of a crack, and takes its anchor's velocity,
-        which G2P keeps where no node of its stencil carries mass (gather_massless), so that a piece
-        torn or flung from its body carries its Gaussians along.
+        nothing: it meets the nodes on its anchor's side of a crack, and records where its anchor is
+        (anchor_position), whose velocity field G2P gives it where its own stencil cannot (ride).
         """
         p = wp.tid() + start
         if particles.free[p] == 1:
@@ -119,10 +118,9 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         base, fx = stencil_base(particles.x[p], grid.origin, inv_dx, grid.shape)
         m = particles.mass[p]
         if m <= 0.0:
-            # its anchor carries mass: no other thread writes the anchor's v, nor this particle's
             anchor = particles.anchor[p]
-            if anchor >= 0:
-                particles.v[p] = particles.v[anchor]
+            if anchor >= 0:  # G2P moves positions: it finds the anchor's here
+                particles.anchor_position[p] = particles.x[anchor]
             if wp.static(n_fields == 2):
                 side = p
                 if anchor >= 0:
@@ -294,18 +292,56 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
     """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
 
     @wp.func
+    def gather(velocity: wp.array4d(dtype=wp.vec3), field_bits: int, base: wp.vec3i, fx: wp.vec3, dx: float):
+        """(v_p, C_p) of APIC on the whole stencil: v_p = sum w_i v_i, C_p = 4/dx^2 sum w_i v_i (x_i - x_p)^T.
+        With two fields node (i, j, k) is read in field bit 9 i + 3 j + k of `field_bits`."""
+        weights = stencil_weights(fx)
+        # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
+        ox = wp.cw_mul(weights[0], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
+        oy = wp.cw_mul(weights[1], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
+        oz = wp.cw_mul(weights[2], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
+        # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
+        # weights[0, i] weights[1, j] weights[2, k], so both sums are taken one axis at a time (k, then j, then i)
+        vp = wp.vec3(0.0)
+        Bx = wp.vec3(0.0)
+        By = wp.vec3(0.0)
+        Bz = wp.vec3(0.0)
+        for i in range(3):
+            v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
+            vy_i = wp.vec3(0.0)  # ... of oy wz v
+            vz_i = wp.vec3(0.0)  # ... of wy oz v
+            for j in range(3):
+                v_ij = wp.vec3(0.0)  # sum over k of wz v
+                vz_ij = wp.vec3(0.0)  # ... of oz v
+                for k in range(3):
+                    field = int(0)
+                    if wp.static(n_fields == 2):
+                        field = (field_bits >> (9 * i + 3 * j + k)) & 1
+                    vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
+                    v_ij += weights[2, k] * vi
+                    vz_ij += oz[k] * vi
+                v_i += weights[1, j] * v_ij
+                vy_i += oy[j] * v_ij
+                vz_i += weights[1, j] * vz_ij
+            vp += weights[0, i] * v_i
+            Bx += ox[i] * v_i
+            By += weights[0, i] * vy_i
+            Bz += weights[0, i] * vz_i
+        return vp, (4.0 / (dx * dx)) * wp.matrix_from_cols(Bx, By, Bz)
+
+    @wp.func
     def gather_massless(velocity: wp.array4d(dtype=wp.vec3), mass: wp.array4d(dtype=float), field_bits: int,
-                        base: wp.vec3i, fx: wp.vec3, dx: float, fallback: wp.vec3):
-        """(v_p, C_p) of a massless particle: the linear velocity field v_p + C_p (x - x_p) that fits, in least
-        squares weighted by w_i, the nodes of its stencil that carry mass after the grid update.
+                        base: wp.vec3i, fx: wp.vec3, dx: float):
+        """(v_p, C_p, weight) of a massless particle: the linear velocity field v_p + C_p (x - x_p) that fits, in
+        least squares weighted by w_i, the nodes of its stencil that carry mass after the grid update, and the
+        weight sum w_i of those nodes (0: none, and v_p = 0, C_p = 0).
 
         APIC's C = 4/dx^2 sum w v (x_i - x_p)^T assumes the whole stencil, where sum w (x_i - x_p) = 0 and
         sum w (x_i - x_p)(x_i - x_p)^T = dx^2/4 I. At a body's surface part of the stencil is empty, and
         with the empty nodes left out neither holds: a body in free flight would shear its surface
         Gaussians. The fit's moment matrix is that of the nodes with mass about their centre, plus
         REGULARISATION of the whole stencil's, so it stays invertible (and C bounded) where those nodes
-        lie in a plane; on a whole stencil the fit is APIC's. v_p is the nodes' weighted mean velocity;
-        `fallback` (its anchor's velocity, particle_to_grid) and C = 0 where no node about it carries mass.
+        lie in a plane; on a whole stencil the fit is APIC's. v_p is the nodes' weighted mean velocity.
         """
         weight = float(0.0)
         v_sum = wp.vec3(0.0)
@@ -330,14 +366,43 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
                     vd += a * wp.outer(v, d)
                     dd += a * wp.outer(d, d)
         if weight <= 0.0:
-            return fallback, wp.mat33(0.0)
+            return wp.vec3(0.0), wp.mat33(0.0), weight
         v_mean = v_sum / weight
         d_mean = d_sum / weight
         if weight >= 1.0 - 1e-6:  # the whole stencil: APIC's C
-            return v_mean, (4.0 / (dx * dx)) * vd
+            return v_mean, (4.0 / (dx * dx)) * vd, weight
         moments = dd - weight * wp.outer(d_mean, d_mean) \
             + (REGULARISATION * 0.25 * dx * dx) * wp.identity(n=3, dtype=float)
-        return v_mean, (vd - weight * wp.outer(v_mean, d_mean)) * wp.inverse(moments)
+        return v_mean, (vd - weight * wp.outer(v_mean, d_mean)) * wp.inverse(moments), weight
+
+    @wp.func
+    def ride(p: int, velocity: wp.array4d(dtype=wp.vec3), cracks: Cracks, grid: GridNodes, particles: Particles,
+             base: wp.vec3i, fx: wp.vec3):
+        """(v_p, C_p) of a massless particle p (a Gaussian riding on its body's solid): the fit to its stencil's
+        nodes with mass (gather_massless) while it lies within a cell of its anchor; else, or where no node
+        about it carries mass, its anchor's APIC velocity field at it, v_a + C_a (x_p - x_a), gathered at
+        the anchor's position of this substep's P2G. Beyond a cell its stencil barely holds its anchor's
+        material and may hold another piece's (at a tear) or none (a piece flung away). Without an anchor
+        on the grid: the fit, or its own velocity where no node about it carries mass."""
+        field_bits = int(0)
+        if wp.static(n_fields == 2):
+            field_bits = cracks.field_bits[p]
+        anchor = particles.anchor[p]
+        at = particles.anchor_position[p]
+        offset = particles.x[p] - at
+        follows = anchor >= 0 and on_grid(at, grid.origin, grid.dx, grid.shape, grid.closed_faces, 0.0)
+        if not follows or wp.length(offset) <= grid.dx:
+            v, C, weight = gather_massless(velocity, grid.mass, field_bits, base, fx, grid.dx)
+            if weight > 0.0:
+                return v, C
+            if not follows:
+                return particles.v[p], wp.mat33(0.0)
+        anchor_bits = int(0)
+        if wp.static(n_fields == 2):
+            anchor_bits = cracks.field_bits[anchor]  # written by P2G, read only here
+        anchor_base, anchor_fx = stencil_base(at, grid.origin, 1.0 / grid.dx, grid.shape)
+        va, Ca = gather(velocity, anchor_bits, anchor_base, anchor_fx, grid.dx)
+        return va + Ca * offset, Ca
 
     @wp.kernel(module="unique")
     def grid_to_particle(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles):
@@ -348,8 +413,8 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         layer. Particles of bodies that meet the ground themselves (own_ground, rigid) gather the
         velocity before the ground's contact law. With two fields each node is read in the particle's
         own field there (cracks.field_bits, written by P2G). A massless particle (a Gaussian riding on
-        its body's solid) gathers by gather_massless: it moves with the material about it, not with the
-        empty nodes beyond its body's surface.
+        its body's solid) gathers by `ride`: it moves with the material it belongs to, not with the
+        empty nodes beyond its body's surface nor with another piece.
         """
         p = wp.tid() + start
         if particles.free[p] != 0:
@@ -361,45 +426,16 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         dx = grid.dx
         dt = substep.dt
         shape = grid.shape
-        inv_dx = 1.0 / dx
-        base, fx = stencil_base(particles.x[p], origin, inv_dx, shape)
-        weights = stencil_weights(fx)
+        base, fx = stencil_base(particles.x[p], origin, 1.0 / dx, shape)
         vp = wp.vec3(0.0)
         Cp = wp.mat33(0.0)
         if particles.mass[p] <= 0.0:
-            vp, Cp = gather_massless(velocity, grid.mass, cracks.field_bits[p], base, fx, dx, particles.v[p])
+            vp, Cp = ride(p, velocity, cracks, grid, particles, base, fx)
         else:
-            # node offsets times weights, o_a = w_a (node - fx_a) dx, per axis
-            ox = wp.cw_mul(weights[0], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[0])) * dx
-            oy = wp.cw_mul(weights[1], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[1])) * dx
-            oz = wp.cw_mul(weights[2], wp.vec3(0.0, 1.0, 2.0) - wp.vec3(fx[2])) * dx
-            # v_p = sum w v_i and column a of B = sum w v_i (x_i - x_p)_a; the weights are products
-            # weights[0, i] weights[1, j] weights[2, k], so both sums are taken one axis at a time (k, then j, then i)
-            Bx = wp.vec3(0.0)
-            By = wp.vec3(0.0)
-            Bz = wp.vec3(0.0)
-            for i in range(3):
-                v_i = wp.vec3(0.0)  # sum over j, k of wy wz v
-                vy_i = wp.vec3(0.0)  # ... of oy wz v
-                vz_i = wp.vec3(0.0)  # ... of wy oz v
-                for j in range(3):
-                    v_ij = wp.vec3(0.0)  # sum over k of wz v
-                    vz_ij = wp.vec3(0.0)  # ... of oz v
-                    for k in range(3):
-                        field = int(0)
-                        if wp.static(n_fields == 2):
-                            field = (cracks.field_bits[p] >> (9 * i + 3 * j + k)) & 1
-                        vi = velocity[field, base[0] + i, base[1] + j, base[2] + k]
-                        v_ij += weights[2, k] * vi
-                        vz_ij += oz[k] * vi
-                    v_i += weights[1, j] * v_ij
-                    vy_i += oy[j] * v_ij
-                    vz_i += weights[1, j] * vz_ij
-                vp += weights[0, i] * v_i
-                Bx += ox[i] * v_i
-                By += weights[0, i] * vy_i
-                Bz += weights[0, i] * vz_i
-            Cp = (4.0 * inv_dx * inv_dx) * wp.matrix_from_cols(Bx, By, Bz)
+            field_bits = int(0)
+            if wp.static(n_fields == 2):
+                field_bits = cracks.field_bits[p]
+            vp, Cp = gather(velocity, field_bits, base, fx, dx)
         if particles.prescribed[p] != 0:
             vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid
         # a closed face keeps particles off its wall layer; through an open one they leave the grid
@@ -502,6 +538,7 @@ class MPMSolver:
         self.free = wp.zeros(n, dtype=wp.int32, device=device)
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
         self.anchor = wp.array(anchors(positions, masses, object_id), dtype=wp.int32, device=device)
+        self.anchor_position = wp.zeros(n, dtype=wp.vec3, device=device)
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
         # per snow object (its index, its material), where the substep follows its hardening

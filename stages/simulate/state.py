@@ -29,7 +29,8 @@ class Particles:
     free: wp.array(dtype=wp.int32)  # (P,) 0 on the grid, 1 off it (free flight), 2 rejoining at the next P2G
     own_ground: wp.array(dtype=wp.int32)  # (P,) 1 for bodies that meet the ground as a whole (rigid.py)
     anchor: wp.array(dtype=wp.int32)  # (P,) a massless particle's nearest massive one of its object at rest
-    # (mpm.anchors), whose crack side and velocity it takes; -1 for the others
+    # (mpm.anchors), whose crack side it takes and whose motion it follows where its stencil cannot; -1 else
+    anchor_position: wp.array(dtype=wp.vec3)  # (P,) a massless particle's anchor's position at this P2G, m
 
 
 @wp.struct
