@@ -114,10 +114,11 @@ PORE_OPENINGS = (0.25, 0.75)
 opened to a shallow bowl. Lit by a sky that fills its opening, the inside of a sphere sees the opening with
 view factor f wherever it stands, and the rest of itself with 1 - f, so with albedo rho its radiosity is
 rho f E / (1 - rho (1 - f)) against a flat face's rho E (pore_shades)."""
-FINE_PX = 1.5
-"""The smallest diameter (output px, at the particle's distance at rest) a grain or pore is drawn at: splat's
-antialiasing (DILATION_PX2) widens it to about 2 px, and a finer Gaussian would be that filter alone. A drawn
-grain larger than the material's stands for the grains within it (fine_structure)."""
+FINE_PX = 1.0
+"""The smallest diameter (output px, at the particle's distance at rest) a grain or pore is drawn at, a pixel:
+splat's antialiasing (DILATION_PX2) widens it to about 1.6 px (full width at half maximum), and a finer
+Gaussian would be that filter alone. A drawn grain larger than the material's stands for the grains within it
+(fine_structure). At 1.5 px the sand's texture is as strong, its variance of the Laplacian a third lower."""
 GRAIN_REACH = 1.5
 """How far from its particle's centre a grain of sand or snow lies, in the particle's picture's radii: the
 grains of neighbouring particles interleave where they meet, as sand of two colours does where it mixes, and
@@ -125,7 +126,7 @@ the heap shows no particle's outline."""
 FWHM_SIGMAS = 2 * math.sqrt(2 * math.log(2))
 """A Gaussian's full width at half maximum in standard deviations (2.355)."""
 FINE_PER_PARTICLE = 64
-"""At most this many grains or pores drawn on one particle (a particle 12 px across at FINE_PX)."""
+"""At most this many grains or pores drawn on one particle (a particle 10 px across at FINE_PX)."""
 EDGE_PX = 2
 """Pixels inside its silhouette from which the photograph gives a grain its colour (the silhouette's own mix in the
 background)."""
