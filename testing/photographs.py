@@ -238,3 +238,22 @@ def write_scene(folder: Path, shape: Shape, fov_deg: float = 40.0, width: int = 
 def side_view(shape: Capsule, azimuth_deg: float = 90.0) -> np.ndarray:
     """world_to_camera (4,4) of the input camera orbited about the capsule's centre."""
     return orbit_world_to_camera(shape.centre, azimuth_deg)
+
+
+def soft_edged(photo: Photograph, backdrop: np.ndarray, blur_px: float, rim_px: float = 0.0,
+               rim_rgb: tuple = (40, 40, 40)) -> tuple[np.ndarray, np.ndarray]:
+    """``photo``'s object over ``backdrop`` (H, W, 3 u8, the known background) with its outline blurred, as a
+    defocused or motion-blurred object is photographed: its colour and coverage blurred by a Gaussian of
+    ``blur_px`` pixels and composited over the sharp backdrop (premultiplied). Its outermost ``rim_px``
+    pixels may be a dark frame of ``rim_rgb``. Returns the photograph (H, W, 3 u8) and the object's blurred
+    coverage (H, W float in [0, 1]) of all but that rim: where a segmentation that leaves the rim out ends."""
+    inside = photo.mask.astype(np.uint8)
+    colour = photo.rgb.astype(np.float64)
+    depth = cv2.distanceTransform(inside, cv2.DIST_L2, 5)
+    rim = photo.mask & (depth <= rim_px)
+    colour[rim] = rim_rgb
+    blur = lambda image: cv2.GaussianBlur(image, (0, 0), blur_px)  # noqa: E731
+    coverage = blur(inside.astype(np.float64))
+    premultiplied = blur(colour * inside[..., None])
+    composite = premultiplied + (1 - coverage[..., None]) * backdrop.astype(np.float64)
+    return np.clip(composite + 0.5, 0, 255).astype(np.uint8), blur((photo.mask & ~rim).astype(np.float64))

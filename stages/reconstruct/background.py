@@ -18,6 +18,13 @@ patch of another material (the table's wood where the cup stood on its
 saucer) would outline the object. So the fill cross-fades from diffusion at
 the seam to exemplar past twice the dilation.
 
+The hole is each object's mask grown past its edge's whole transition in the
+photograph, read per boundary pixel along the outline's normal: a segmentation
+ends inside a blurred object's soft edge, and the edge's outer part, or a dark
+rim just outside, left in the photograph outlines the object's place once it
+moves away. The transition ends where the photograph varies no more than the
+ground beyond it does, and at most a fifth of the object's size out.
+
 The objects' own shadows go too: an object that moves away takes its shadow
 with it (the enhancement draws it anew under the object, stages/enhance/shadow.py).
 A shadow is a smooth darkening of the ground that starts at an object's foot, so
@@ -30,6 +37,7 @@ edges, and divided out of every channel before the hole is filled
 from __future__ import annotations
 
 import logging
+import warnings
 
 import cv2
 import numpy as np
@@ -37,6 +45,7 @@ from patchmatch_cython import CythonSolver
 from patchmatch_cython.imageops import (build_query_patch_centers, build_valid_patch_centers, sanitize_nnf,
                                          upsample)
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 log = logging.getLogger("physmotion.reconstruct.background")
 
@@ -105,6 +114,17 @@ EDGE_EPS = 1e-3
 """Regularisation of the guided filter (He et al. 2010) that gives the shadow found on the working copy the
 photograph's own edges (brightness in [0, 1], squared): a hard-edged shadow, smoothed on the copy and
 divided out, left its outline; the ground's texture varies the brightness more than this and stays."""
+EDGE_REACH = 0.2
+"""The hole reaches past an object's mask at most this share of its size (the square root of its pixel
+count): an edge's transition is read no farther, and nothing of the ground beyond it is filled."""
+EDGE_GROUND = (90, 2.0)
+"""An edge's transition goes on while the photograph varies, over a window, more than this factor times
+this percentile of how the ground beyond it varies over such windows: a textured ground varies too."""
+EDGE_GROUND_BAND = (1.5, 2.5)
+"""The ground beyond an edge is read this many reaches (EDGE_REACH) out along its normal: past the reach
+itself, so that a transition that runs up to it does not pass for the ground's texture."""
+EDGE_FLOOR = 1.5
+"""sRGB levels (of 255) over a window below which the photograph counts as not varying, whatever the ground."""
 MAX_SHADOW = 0.8
 """Darkening divided out at most: deeper, the ground's colour is mostly noise."""
 
@@ -278,19 +298,93 @@ def exemplar_fill(photo: np.ndarray, hole: np.ndarray, start: np.ndarray) -> np.
 
 
 def dilation_px(height: int, width: int) -> int:
-    """How far past the masks to inpaint: soft edges and GrabCut's misses (1 % of the size, at least 3 px)."""
+    """The least the hole reaches past the masks, pixels: GrabCut's misses and an edge's antialiasing
+    (1 % of the photograph's size, at least 3 px). It is also the window over which an edge's transition
+    is read (:func:`edge_widths`)."""
     return max(3, round(0.01 * max(height, width)))
 
 
-def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """RGB u8 (H,W,3): ``photo`` with every object (``labels`` > 0), dilated, filled from the rest of it,
-    and the objects' shadows divided out (:func:`photographed_shadow`).
+def edge_widths(photo: np.ndarray, inside: np.ndarray, ground: np.ndarray,
+                window_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """How far past the outline of ``inside`` (H, W bool, one object) the photograph (H, W, 3) still changes
+    across it: the boundary pixels (N, 2 int, row and column) and, for each, the width (N,) in pixels of
+    the edge's transition outside it, at most EDGE_REACH of the object's size.
 
-    Pixels outside the dilated objects and their shadows are the photograph's, unchanged; the fill is
+    Along the outward normal the photograph (smoothed by a sixth of ``window_px``) is sampled; the transition
+    ends where, over the next ``window_px``, it varies no more than the ``ground`` (H, W bool: no object's)
+    does farther out (EDGE_GROUND, in EDGE_GROUND_BAND, along this boundary stretch), or than EDGE_FLOOR.
+    A blurred outline's soft ramp and a dark rim, halo or shadow that starts at the outline are inside
+    it; the ground's texture, and a structure past a flat gap, are not. Where no ground is seen (the
+    photograph's border, other objects) the transition is taken as ended."""
+    reach = EDGE_REACH * float(np.sqrt(inside.sum()))
+    step = window_px / 6
+    smooth = cv2.GaussianBlur(photo.astype(np.float32), (0, 0), window_px / 6)
+    mask = inside.astype(np.uint8)
+    boundary = inside & (cv2.dilate(1 - mask, np.ones((3, 3), np.uint8)) > 0)
+    rows, cols = np.nonzero(boundary)
+    if not rows.size:  # the object covers the whole photograph
+        return np.zeros((0, 2), np.int64), np.zeros(0)
+    soft = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), window_px / 2)
+    down, right = np.gradient(soft)
+    normal = -np.stack([right[rows, cols], down[rows, cols]], 1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-9)
+    along = np.arange(0, EDGE_GROUND_BAND[1] * reach + window_px + step, step)
+    where = [rows[:, None] + normal[:, 1:] * along, cols[:, None] + normal[:, :1] * along]
+    profile = np.stack([ndimage.map_coordinates(smooth[..., c], where, order=1, mode="nearest")
+                        for c in range(3)], -1)
+    seen = ndimage.map_coordinates(ground.astype(np.uint8), where, order=0, mode="constant", cval=0) > 0
+    # the variation of each channel over [s, s + window_px], the most of any channel
+    span = round(window_px / step) + 1
+    origin = -(span // 2)
+    variation = (ndimage.maximum_filter1d(profile, span, axis=1, origin=origin, mode="nearest") -
+                 ndimage.minimum_filter1d(profile, span, axis=1, origin=origin, mode="nearest")).max(-1)
+    seen = ndimage.minimum_filter1d(seen, span, axis=1, origin=origin, mode="constant", cval=0)
+    band = (along >= EDGE_GROUND_BAND[0] * reach) & (along <= EDGE_GROUND_BAND[1] * reach)
+    points = np.stack([rows, cols], 1)
+    tree = cKDTree(points)
+    with warnings.catch_warnings():  # a profile, or a whole stretch, that sees no ground
+        warnings.simplefilter("ignore", RuntimeWarning)
+        texture = np.nanpercentile(np.where(seen, variation, np.nan)[:, band], EDGE_GROUND[0], axis=1)
+        # a darker patch of ground beside one stretch understates the ground's texture there: at least
+        # the median all around the object counts
+        texture = np.maximum([np.nanmedian(texture[stretch]) for stretch in tree.query_ball_point(points, r=reach)],
+                             np.nanmedian(texture))
+    tolerance = np.where(np.isnan(texture), np.inf, np.maximum(EDGE_GROUND[1] * texture, EDGE_FLOOR))
+    flat = (variation <= tolerance[:, None]) | (along > reach)
+    width = along[np.argmax(flat, axis=1)]
+    # one profile that meets a speck is no edge: the stretch's median
+    width = np.array([np.median(width[stretch]) for stretch in tree.query_ball_point(points, r=window_px)])
+    return points, width
+
+
+def background_hole(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """(H, W) u8, 1 where the background is filled: every object (``labels`` > 0) grown, per boundary
+    pixel, past its edge's whole transition in the photograph (:func:`edge_widths`), and at least
+    :func:`dilation_px`. A mask that ends inside an object's soft edge leaves its outer part, and a dark
+    rim or halo just outside, in the photograph: once the object moves away, they outline its place."""
+    least = dilation_px(*labels.shape)
+    hole = (labels > 0).astype(np.uint8)
+    radii = np.zeros(labels.shape, np.int32)
+    for k in np.unique(labels[labels > 0]):
+        points, width = edge_widths(photo, labels == k, labels == 0, least)
+        # a pixel more: where the transition counts as ended it may still be off the ground by the tolerance
+        radii[points[:, 0], points[:, 1]] = np.maximum(radii[points[:, 0], points[:, 1]],
+                                                       np.maximum(least, np.ceil(width) + 1).astype(np.int32))
+    for radius in np.unique(radii[radii > 0]):
+        disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1,) * 2)
+        hole |= cv2.dilate((radii == radius).astype(np.uint8), disc)
+    return hole
+
+
+def inpaint_background(photo: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """RGB u8 (H,W,3): ``photo`` with every object (``labels`` > 0) and its edge's transition
+    (:func:`background_hole`) filled from the rest of it, and the objects' shadows divided out
+    (:func:`photographed_shadow`).
+
+    Pixels outside that hole and the objects' shadows are the photograph's, unchanged; the fill is
     the same on every run (fixed seed)."""
     radius = dilation_px(*labels.shape)
-    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
-    hole = cv2.dilate((labels > 0).astype(np.uint8), kernel)
+    hole = background_hole(photo, labels)
     if not hole.any():
         return photo.copy()
     # the shadow is found around the hole filled by diffusion, and divided out before the exemplar
