@@ -5,7 +5,7 @@ and half green (right). Its side and back, which the photograph never saw, are p
 a closure that got the unseen side wrong would paint them; most of its inside lies nearer them than
 the front. The photograph is the only truth on what colour the inside is: the colour on each point's
 ray. The log slumps as sand under pm-simulate's own Simulation; the coarse render's heap is measured
-against the share of each colour at rest and against the lattice's spacing."""
+against the share of each colour at rest and against a granular photograph's texture."""
 import cv2
 import numpy as np
 import pytest
