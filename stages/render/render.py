@@ -263,7 +263,8 @@ def render_video(gaussians: GaussiansArtifact, trajectories: TrajectoriesArtifac
                 torch.cat([features, torch.nn.functional.pad(fine_colors, (0, 1))]), camera,
                 covariances=torch.cat([covariances, fine_covariances]))
             alpha = render.alpha
-            rgb, surface_weight = render.features[..., :4].split([3, 1], -1)  # the bodies' camera z after
+            # (the particles' own render carries their camera depth in a fifth channel)
+            rgb, surface_weight = render.features[..., :4].split([3, 1], -1)
             covered = alpha >= MIN_ALPHA
             votes = seen_now.clamp_min(MIN_VOTE)
             F_inverse = inverse_deformation(F)
