@@ -9,6 +9,8 @@ One substep, one kernel per physical step:
                      each side of a crack into its own field
   grid_update        momentum -> velocity, gravity, contact across cracks, ground and walls
   grid_to_particle   gather velocity and its gradient C, advect, F <- (I + dt C) F;
+                     massless particles ride with the material they belong to (mark_riders
+                     beside P2G, ride beside G2P);
                      particles off the grid fly freely (ballistic, ground contact only)
   rigid projection   (rigid.py) rigid objects follow one rigid motion
   update_stress      (constitutive.py) return mapping and Kirchhoff stress
@@ -42,7 +44,7 @@ from scipy.spatial import cKDTree
 from .constitutive import (SNOW_HARDENING_GROWTH, SNOW_HARDENING_MAX, initial_history, params_array, snow_hardening,
                            update_stress)
 from .crack_fields import CrackFields, breaks, crack_contact, crack_field
-from .state import Cracks, GridNodes, Particles, Step
+from .state import Cracks, GridNodes, Particles, Riders, Step
 from .stencil import stencil_base, stencil_weights
 
 # Nodes this close to a domain face form the wall layer; particles are kept
@@ -89,9 +91,10 @@ def stencil_fields(cracks: Cracks, base: wp.vec3i, gradient: wp.vec3):
     return bits
 
 
-def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
+def particle_to_grid_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
     """P2G compiled for n_fields (1, or 2 where a body can tear, crack_fields.py) velocity fields per
-    node: the one-field kernel, every scene without fracture, carries no per-node crack test."""
+    node: (particle_to_grid, of the particles with mass, mark_riders, of the massless ones). The one-field
+    kernels, every scene without fracture, carry no per-node crack test."""
 
     @wp.kernel(module="unique")
     def particle_to_grid(start: int, part: int, substep: Step, particles: Particles, cracks: Cracks,
@@ -102,13 +105,12 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         copy part * n_fields + field of grid.momentum_mass. With two fields (crack_fields.py) the field
         of each of the 27 nodes is bit 9 i + 3 j + k of cracks.field_bits[p], which G2P reads back.
         Free particles (off the grid) scatter nothing; one coming back (free = 2) joins the grid here.
-
-        A massless particle (a Gaussian riding on its body's solid) has no volume either, so it scatters
-        nothing: it meets the nodes on its anchor's side of a crack, and records where its anchor is
-        (anchor_position), whose velocity field G2P gives it where its own stencil cannot (ride).
+        A massless particle has no volume either (mass = density x volume): it scatters nothing, and
+        mark_riders takes it.
         """
         p = wp.tid() + start
-        if particles.free[p] == 1:
+        m = particles.mass[p]
+        if particles.free[p] == 1 or m <= 0.0:
             return
         if particles.free[p] == 2:
             particles.free[p] = 0
@@ -116,17 +118,6 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
         dt = substep.dt
         inv_dx = 1.0 / dx
         base, fx = stencil_base(particles.x[p], grid.origin, inv_dx, grid.shape)
-        m = particles.mass[p]
-        if m <= 0.0:
-            anchor = particles.anchor[p]
-            if anchor >= 0:  # G2P moves positions: it finds the anchor's here
-                particles.anchor_position[p] = particles.x[anchor]
-            if wp.static(n_fields == 2):
-                side = p
-                if anchor >= 0:
-                    side = anchor
-                cracks.field_bits[p] = stencil_fields(cracks, base, cracks.gradient[side])
-            return
         bits = int(0)
         if wp.static(n_fields == 2):
             bits = stencil_fields(cracks, base, cracks.gradient[p])
@@ -153,10 +144,32 @@ def particle_to_grid_kernel(n_fields: int) -> wp.Kernel:
                     wp.atomic_add(grid.momentum_mass, copy, base[0] + i, base[1] + j, base[2] + k,
                                   w * wp.vec4(momentum[0], momentum[1], momentum[2], m))
 
-    return particle_to_grid
+    @wp.kernel(module="unique")
+    def mark_riders(start: int, particles: Particles, riders: Riders, cracks: Cracks, grid: GridNodes):
+        """Beside P2G, for each massless particle (a Gaussian riding on its body's solid): where its anchor
+        is now (riders.anchor_position: G2P moves positions, so ride finds the anchor's here) and, with two
+        fields, its stencil's fields on its anchor's side of a crack. One coming back (free = 2) joins the grid."""
+        p = wp.tid() + start
+        if particles.free[p] == 1 or particles.mass[p] > 0.0:
+            return
+        if particles.free[p] == 2:
+            particles.free[p] = 0
+        anchor = riders.anchor[p]
+        if anchor >= 0:
+            riders.anchor_position[p] = particles.x[anchor]
+        if wp.static(n_fields == 2):
+            side = p
+            if anchor >= 0:
+                side = anchor
+            base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
+            cracks.field_bits[p] = stencil_fields(cracks, base, cracks.gradient[side])
+
+    return particle_to_grid, mark_riders
 
 
-PARTICLE_TO_GRID = {n_fields: particle_to_grid_kernel(n_fields) for n_fields in (1, 2)}
+PARTICLE_TO_GRID, MARK_RIDERS = {}, {}  # per number of fields: P2G of the particles with mass, and its massless twin
+for _n_fields in (1, 2):
+    PARTICLE_TO_GRID[_n_fields], MARK_RIDERS[_n_fields] = particle_to_grid_kernels(_n_fields)
 
 
 @wp.kernel
@@ -288,8 +301,10 @@ def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_face
     return inside
 
 
-def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
-    """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
+def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
+    """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel: (grid_to_particle, of the
+    particles with mass, ride, of the massless ones); each leaves the others alone, so the particles with mass
+    pay nothing for the way the massless ones ride."""
 
     @wp.func
     def gather(velocity: wp.array4d(dtype=wp.vec3), field_bits: int, base: wp.vec3i, fx: wp.vec3, dx: float):
@@ -376,88 +391,101 @@ def grid_to_particle_kernel(n_fields: int) -> wp.Kernel:
         return v_mean, (vd - weight * wp.outer(v_mean, d_mean)) * wp.inverse(moments), weight
 
     @wp.func
-    def ride(p: int, velocity: wp.array4d(dtype=wp.vec3), cracks: Cracks, grid: GridNodes, particles: Particles,
-             base: wp.vec3i, fx: wp.vec3):
-        """(v_p, C_p) of a massless particle p (a Gaussian riding on its body's solid): the fit to its stencil's
-        nodes with mass (gather_massless) while it lies within a cell of its anchor; else, or where no node
-        about it carries mass, its anchor's APIC velocity field at it, v_a + C_a (x_p - x_a), gathered at
-        the anchor's position of this substep's P2G. Beyond a cell its stencil barely holds its anchor's
-        material and may hold another piece's (at a tear) or none (a piece flung away). Without an anchor
-        on the grid: the fit, or its own velocity where no node about it carries mass."""
-        field_bits = int(0)
-        if wp.static(n_fields == 2):
-            field_bits = cracks.field_bits[p]
-        anchor = particles.anchor[p]
-        at = particles.anchor_position[p]
-        offset = particles.x[p] - at
-        follows = anchor >= 0 and on_grid(at, grid.origin, grid.dx, grid.shape, grid.closed_faces, 0.0)
-        if not follows or wp.length(offset) <= grid.dx:
-            v, C, weight = gather_massless(velocity, grid.mass, field_bits, base, fx, grid.dx)
-            if weight > 0.0:
-                return v, C
-            if not follows:
-                return particles.v[p], wp.mat33(0.0)
-        anchor_bits = int(0)
-        if wp.static(n_fields == 2):
-            anchor_bits = cracks.field_bits[anchor]  # written by P2G, read only here
-        anchor_base, anchor_fx = stencil_base(at, grid.origin, 1.0 / grid.dx, grid.shape)
-        va, Ca = gather(velocity, anchor_bits, anchor_base, anchor_fx, grid.dx)
-        return va + Ca * offset, Ca
-
-    @wp.kernel(module="unique")
-    def grid_to_particle(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles):
-        """Gather v_p and the APIC affine velocity C_p, advect x_p, and update the trial F_p = (I + dt C_p) F_p.
-
-        grid.closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is
-        closed (the ground), 2 both faces are closed (walls). Closed faces keep particles off the wall
-        layer. Particles of bodies that meet the ground themselves (own_ground, rigid) gather the
-        velocity before the ground's contact law. With two fields each node is read in the particle's
-        own field there (cracks.field_bits, written by P2G). A massless particle (a Gaussian riding on
-        its body's solid) gathers by `ride`: it moves with the material it belongs to, not with the
-        empty nodes beyond its body's surface nor with another piece.
-        """
-        p = wp.tid() + start
-        if particles.free[p] != 0:
-            return  # free_flight moves it, or it joins the grid at the next P2G
-        velocity = grid.velocity
-        if particles.own_ground[p] != 0:
-            velocity = grid.unsupported_velocity
-        origin = grid.origin
-        dx = grid.dx
-        dt = substep.dt
-        shape = grid.shape
-        base, fx = stencil_base(particles.x[p], origin, 1.0 / dx, shape)
-        vp = wp.vec3(0.0)
-        Cp = wp.mat33(0.0)
-        if particles.mass[p] <= 0.0:
-            vp, Cp = ride(p, velocity, cracks, grid, particles, base, fx)
-        else:
-            field_bits = int(0)
-            if wp.static(n_fields == 2):
-                field_bits = cracks.field_bits[p]
-            vp, Cp = gather(velocity, field_bits, base, fx, dx)
+    def advect(p: int, vp: wp.vec3, Cp: wp.mat33, substep: Step, grid: GridNodes, particles: Particles):
+        """Set v_p, C_p (a condition's velocity overrides v_p), advect x_p and update the trial F_p = (I + dt C_p)
+        F_p. A closed face keeps particles off its wall layer; through an open one they leave the grid (free)."""
         if particles.prescribed[p] != 0:
             vp = particles.prescribed_velocity[p]  # velocity and fixed conditions override the grid
-        # a closed face keeps particles off its wall layer; through an open one they leave the grid
+        dx = grid.dx
+        dt = substep.dt
         lo = float(BOUNDARY_NODES) * dx
-        xp = particles.x[p] + dt * vp - origin
+        xp = particles.x[p] + dt * vp - grid.origin
         for a in range(3):
             if grid.closed_faces[a] >= 1:
                 xp[a] = wp.max(xp[a], lo)
             if grid.closed_faces[a] == 2:
-                xp[a] = wp.min(xp[a], float(shape[a] - 1) * dx - lo)
-        particles.x[p] = xp + origin
+                xp[a] = wp.min(xp[a], float(grid.shape[a] - 1) * dx - lo)
+        particles.x[p] = xp + grid.origin
         particles.v[p] = vp
         particles.C[p] = Cp
         particles.F[p] = (wp.identity(n=3, dtype=float) + dt * Cp) * particles.F[p]
-        if not on_grid(particles.x[p], origin, dx, shape, grid.closed_faces, 0.0):
+        if not on_grid(particles.x[p], grid.origin, dx, grid.shape, grid.closed_faces, 0.0):
             particles.free[p] = 1
             particles.C[p] = wp.mat33(0.0)
 
-    return grid_to_particle
+    @wp.kernel(module="unique")
+    def grid_to_particle(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles):
+        """Gather v_p and the APIC affine velocity C_p of the particles with mass, advect x_p, and update the
+        trial F_p = (I + dt C_p) F_p (advect).
+
+        grid.closed_faces per axis: 0 open (a particle that leaves becomes free), 1 the low face is
+        closed (the ground), 2 both faces are closed (walls). Particles of bodies that meet the ground
+        themselves (own_ground, rigid) gather the velocity before the ground's contact law. With two
+        fields each node is read in the particle's own field there (cracks.field_bits, written by P2G).
+        The massless particles are `ride`'s.
+        """
+        p = wp.tid() + start
+        if particles.free[p] != 0 or particles.mass[p] <= 0.0:
+            return  # free_flight moves it, or it joins the grid at the next P2G; or it rides
+        velocity = grid.velocity
+        if particles.own_ground[p] != 0:
+            velocity = grid.unsupported_velocity
+        base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / grid.dx, grid.shape)
+        field_bits = int(0)
+        if wp.static(n_fields == 2):
+            field_bits = cracks.field_bits[p]
+        vp, Cp = gather(velocity, field_bits, base, fx, grid.dx)
+        advect(p, vp, Cp, substep, grid, particles)
+
+    @wp.kernel(module="unique")
+    def ride(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles, riders: Riders):
+        """G2P of the massless particles (Gaussians riding on their body's solid): v_p and C_p are the fit to
+        the stencil's nodes with mass (gather_massless) while the particle lies within a cell of its anchor;
+        else, or where no node about it carries mass, its anchor's APIC velocity field at it,
+        v_a + C_a (x_p - x_a), gathered at where the anchor was at this substep's P2G (mark_riders). Beyond a
+        cell its stencil barely holds its anchor's material and may hold another piece's (at a tear) or none
+        (a piece flung away). Without an anchor on the grid: the fit, or its own velocity where no node about
+        it carries mass. It reads no state of another particle that G2P writes: the two run side by side.
+        """
+        p = wp.tid() + start
+        if particles.free[p] != 0 or particles.mass[p] > 0.0:
+            return
+        velocity = grid.velocity
+        if particles.own_ground[p] != 0:
+            velocity = grid.unsupported_velocity
+        dx = grid.dx
+        base, fx = stencil_base(particles.x[p], grid.origin, 1.0 / dx, grid.shape)
+        field_bits = int(0)
+        if wp.static(n_fields == 2):
+            field_bits = cracks.field_bits[p]
+        anchor = riders.anchor[p]
+        at = riders.anchor_position[p]
+        offset = particles.x[p] - at
+        follows = anchor >= 0 and on_grid(at, grid.origin, dx, grid.shape, grid.closed_faces, 0.0)
+        vp = particles.v[p]
+        Cp = wp.mat33(0.0)
+        weight = float(0.0)
+        if not follows or wp.length(offset) <= dx:
+            vp_fit, Cp_fit, weight = gather_massless(velocity, grid.mass, field_bits, base, fx, dx)
+            if weight > 0.0:
+                vp = vp_fit
+                Cp = Cp_fit
+        if follows and weight <= 0.0:
+            anchor_bits = int(0)
+            if wp.static(n_fields == 2):
+                anchor_bits = cracks.field_bits[anchor]  # written by P2G (mark_riders), read only here
+            anchor_base, anchor_fx = stencil_base(at, grid.origin, 1.0 / dx, grid.shape)
+            va, Ca = gather(velocity, anchor_bits, anchor_base, anchor_fx, dx)
+            vp = va + Ca * offset
+            Cp = Ca
+        advect(p, vp, Cp, substep, grid, particles)
+
+    return grid_to_particle, ride
 
 
-GRID_TO_PARTICLE = {n_fields: grid_to_particle_kernel(n_fields) for n_fields in (1, 2)}
+GRID_TO_PARTICLE, RIDE = {}, {}  # per number of fields: G2P of the particles with mass, and of the massless ones
+for _n_fields in (1, 2):
+    GRID_TO_PARTICLE[_n_fields], RIDE[_n_fields] = grid_to_particle_kernels(_n_fields)
 
 
 @wp.kernel
@@ -537,8 +565,10 @@ class MPMSolver:
         self.prescribed_velocity = wp.zeros(n, dtype=wp.vec3, device=device)
         self.free = wp.zeros(n, dtype=wp.int32, device=device)
         self.own_ground = wp.zeros(n, dtype=wp.int32, device=device)
-        self.anchor = wp.array(anchors(positions, masses, object_id), dtype=wp.int32, device=device)
-        self.anchor_position = wp.zeros(n, dtype=wp.vec3, device=device)
+        self.riders = Riders()
+        self.riders.anchor = wp.array(anchors(positions, masses, object_id), dtype=wp.int32, device=device)
+        self.riders.anchor_position = wp.zeros(n, dtype=wp.vec3, device=device)
+        self._massless = bool(np.any(np.asarray(masses) <= 0))  # whether MARK_RIDERS and RIDE are launched
         self.materials = self._yielding = params_array(materials, device)
         self._elastic = params_array(materials, device, yielding=False)
         # per snow object (its index, its material), where the substep follows its hardening
@@ -624,11 +654,14 @@ class MPMSolver:
 
     def substep(self, dt: float) -> None:
         """Advance all particles by dt seconds."""
-        step, cracks, nodes, particles = self.step, self.crack.state, self.nodes, self.particles
+        step, cracks, nodes, particles, riders = self.step, self.crack.state, self.nodes, self.particles, self.riders
         step.dt, step.stiffening = dt, self.stiffening
         if self.n_fields == 2:
             self.crack.find(self)
-        self._per_particle((PARTICLE_TO_GRID[self.n_fields], lambda s, part: [s, part, step, particles, cracks, nodes]))
+        p2g = [(PARTICLE_TO_GRID[self.n_fields], lambda s, part: [s, part, step, particles, cracks, nodes])]
+        if self._massless:
+            p2g.append((MARK_RIDERS[self.n_fields], lambda s, part: [s, particles, riders, cracks, nodes]))
+        self._per_particle(*p2g)
         lo, hi = self._active_nodes()
         if np.all(hi > lo):  # else every particle is off the grid
             update = GRID_UPDATE[self.n_fields]
@@ -637,13 +670,15 @@ class MPMSolver:
                                             inputs=[wp.vec3i(s, lo[1], lo[2]), step, cracks, nodes]))
                 for s, c in _split(hi[0] - lo[0], self.n_parts, lo[0]) if c > 0
             ])
-        g2p = (GRID_TO_PARTICLE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles])
+        g2p = [(GRID_TO_PARTICLE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles])]
+        if self._massless:
+            g2p.append((RIDE[self.n_fields], lambda s, part: [s, step, cracks, nodes, particles, riders]))
         flight = (free_flight, lambda s, part: [s, step, nodes, particles])
         stress = (update_stress, lambda s, part: [s, step, self.materials, particles])
         if self.rigid is None:
-            self._per_particle(flight, g2p, stress)
+            self._per_particle(flight, *g2p, stress)
         else:  # the rigid projection gathers every rigid particle's G2P velocity first
-            self._per_particle(flight, g2p)
+            self._per_particle(flight, *g2p)
             self.rigid.project(self, dt)
             self._per_particle(stress)
         if self._pinned is not None:

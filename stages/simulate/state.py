@@ -28,9 +28,15 @@ class Particles:
     prescribed_velocity: wp.array(dtype=wp.vec3)  # (P,) that velocity, m/s
     free: wp.array(dtype=wp.int32)  # (P,) 0 on the grid, 1 off it (free flight), 2 rejoining at the next P2G
     own_ground: wp.array(dtype=wp.int32)  # (P,) 1 for bodies that meet the ground as a whole (rigid.py)
+
+
+@wp.struct
+class Riders:
+    """The massless particles' anchors: each follows its anchor's motion where its own stencil cannot (mpm.ride)."""
+
     anchor: wp.array(dtype=wp.int32)  # (P,) a massless particle's nearest massive one of its object at rest
-    # (mpm.anchors), whose crack side it takes and whose motion it follows where its stencil cannot; -1 else
-    anchor_position: wp.array(dtype=wp.vec3)  # (P,) a massless particle's anchor's position at this P2G, m
+    # (mpm.anchors), whose crack side it takes; -1 for the others
+    anchor_position: wp.array(dtype=wp.vec3)  # (P,) where a massless particle's anchor is at this P2G, m
 
 
 @wp.struct
