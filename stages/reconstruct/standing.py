@@ -68,13 +68,21 @@ NARROW_SPAN of the height seen before it (a ball's circles, 0.8 of its radius ab
 of it; an upright cylinder's 0.98-1.02)..."""
 FACE_RMS_PX = 0.15
 """... and it is a face where the half of its circle that faces the outline lies this close to it (rms,
-flat_end): an upright cylinder's 0.07-0.12 px; a ball's circles, whose images are flatter than its
-outline, 0.19-0.42..."""
+flat_end): an upright cylinder's 0.05-0.12 px, ray-cast 16-86 px in radius, the pixels' staircase; a
+ball's or a capsule's circles, whose images are flatter than its outline, 0.28-1.16 px, 0.011-0.025 of
+their radius in pixels..."""
+RIM_SHARE = 0.004
+"""... widened by this share of the face's radius in pixels (rim_allowance): a photographed rim departs from
+the image of a circle by a share of its size (a lens's distortion, a focal length or pitch told a few
+degrees off, a cup not quite round), which the pixels' staircase does not tell. The coffee example's rim
+(105-115 px) misses by 0.26-0.30 px, 0.0023-0.0028 of its radius, told its photograph's pitch of 60-63
+degrees. TRACE_PX is widened alike where a circle is looked for..."""
 ROUND_WIDEST = 1.2
 ROUND_END = 0.88
-"""... or where the end is not round: the sphere fitted to the profile before it (dome_end) is wider than
-ROUND_WIDEST of the body, or the last slab seen keeps ROUND_END of the widest radius (a ball's, seen from
-0-40 degrees above, 0.48-0.78). Seen level, a cylinder's end face is an edge whose circle fits the
+"""... or where the end is not round and its circle traces the outline by TRACED_SHARE within TRACE_PX
+unwidened: the sphere fitted to the profile before it (dome_end) is wider than ROUND_WIDEST of the body,
+or the last slab seen keeps ROUND_END of the widest radius (a ball's, seen from 0-40 degrees above,
+0.48-0.78). Seen level, a cylinder's end face is an edge whose circle fits the
 outline to 0.17 px rms, and its last slab seen keeps 0.93."""
 FACE_PX = 1.5
 FACE_SPAN = 0.3
@@ -285,10 +293,18 @@ def covering_slices(view: GravityView, axis_x: float, edges: np.ndarray, radii: 
     return last[covered], first[covered]
 
 
-def traced_share(view: GravityView, centre: np.ndarray, radius: float) -> float:
-    """The share of the image of the horizontal circle (centre (3,), radius) within TRACE_PX of the outline."""
+def rim_allowance(view: GravityView, radius: float) -> float:
+    """How many times the pixel-level tolerances (TRACE_PX, FACE_RMS_PX) a face of `radius` (gravity frame,
+    at z = 1) is allowed: the staircase's FACE_RMS_PX and RIM_SHARE of its radius in pixels, added in
+    quadrature, over FACE_RMS_PX (1 for a small face; 3 for a rim 110 px in radius)."""
+    return math.hypot(1.0, RIM_SHARE * radius * view.K[0, 0] / FACE_RMS_PX)
+
+
+def traced_share(view: GravityView, centre: np.ndarray, radius: float, widened: bool = True) -> float:
+    """The share of the image of the horizontal circle (centre (3,), radius) within TRACE_PX of the outline,
+    widened by its rim_allowance unless `widened` is False."""
     sdf = view.sdf_at(circles(centre[None], np.array([radius])))[0]
-    return float(np.mean(np.abs(sdf) < TRACE_PX))
+    return float(np.mean(np.abs(sdf) < TRACE_PX * (rim_allowance(view, radius) if widened else 1.0)))
 
 
 def revolution(view: GravityView) -> Optional[Revolution]:
@@ -342,10 +358,15 @@ def revolution(view: GravityView) -> Optional[Revolution]:
         shares = [traced_share(view, np.array([axis_x, heights[k], 1.0]), radii[k]) for k in near]
         face = None
         if shares and max(shares) >= TRACED_SHARE:
-            face, misfit = flat_end(view, axis_x, edges, radii, int(near[int(np.argmax(shares))]), outward, pixel)
+            rim = int(near[int(np.argmax(shares))])
+            face, misfit = flat_end(view, axis_x, edges, radii, rim, outward, pixel)
+            fits = misfit <= FACE_RMS_PX * rim_allowance(view, radii[rim])
+            # an end that is not round is a face where its circle traces the outline unwidened
+            traced = max(traced_share(view, np.array([axis_x, heights[k], 1.0]), radii[k], False) for k in near)
         dome = dome_end(edges, radii, end, outward, pixel)
         round_end = dome[1][2] <= ROUND_WIDEST * radii.max() and radii[end] <= ROUND_END * radii.max()
-        ends.append((face, None) if face is not None and (misfit <= FACE_RMS_PX or not round_end) else dome)
+        takes_face = face is not None and (fits or not round_end and traced >= TRACED_SHARE)
+        ends.append((face, None) if takes_face else dome)
     (top_y, top_dome), (bottom_y, bottom_dome) = ends
     ball = None
     if top_dome is not None and bottom_dome is not None:  # one sphere, if both ends' agree: a ball
