@@ -276,10 +276,10 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
     standing solid (standing.standing_solid) whose largest extent is size_m, and (N,) bool: those whose
     front lies on its base. A pixel whose ray grazes by it (within standing.NEAR_PX of its image) lies on
     the surface of the nearest pixel it holds, with no thickness; the rest (a handle) keep their own medial
-    balls, on the vertical plane through the solid's front where they meet it (a handle seen beside or in
-    front of the solid holds on to its seen surface), brought nearer where that would hang them below the
-    solid's base (a handle pointing at a camera that looks down: what the picture shows below the base is
-    nearer, not lower). The fourth value: the body's parts (body.Standing, and the handle's body.Balls)."""
+    balls, on the vertical plane through the solid's middle where they meet it, brought nearer where that
+    would hang them below the solid's base (a handle pointing at a camera that looks down: what the picture
+    shows below the base is nearer, not lower). The fourth value: the body's parts (body.Standing, and the
+    handle's body.Balls)."""
     scale = size_m / solid.solid.extent
     parts = [Standing(solid.solid, GravityView.of(mask, K, down).R, scale)]
     t_in, t_out = scale * solid.t_in, scale * solid.t_out
@@ -295,15 +295,13 @@ def solid_depths(mask: np.ndarray, K: np.ndarray, down: np.ndarray, size_m: floa
         meets = held & (ndimage.distance_transform_edt(~handle) <= NEAR_PX + 2)
         if not meets.any():
             meets = held
-        front = np.full(mask.shape, np.nan)
-        front[mask] = t_in
-        through = (input_rays(meets, K) * front[meets][:, None]).mean(0)
-        *_, balls = ball_depths(handle, K, down, size_m, through)
+        through = (input_rays(meets, K) * mid[meets][:, None]).mean(0)
+        handle_in, handle_out, balls = ball_depths(handle, K, down, size_m, through)
         # every ball scales with the plane's distance, so its lowest point too
         lowest, base = float(np.max(balls.centres @ down + balls.radii)), scale * solid.solid.base_height()
         if lowest > base > 0:
-            through = through * base / lowest
-        t_in[handle[mask]], t_out[handle[mask]], balls = ball_depths(handle, K, down, size_m, through)
+            handle_in, handle_out, balls = ball_depths(handle, K, down, size_m, through * base / lowest)
+        t_in[handle[mask]], t_out[handle[mask]] = handle_in, handle_out
         parts.append(balls)
     return t_in, t_out, solid.on_base, parts
 
