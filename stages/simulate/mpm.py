@@ -233,7 +233,7 @@ def node_velocity(total: wp.vec4, gravity: wp.vec3, dt: float, node: wp.vec3i, s
 
 
 def grid_update_kernel(n_fields: int) -> wp.Kernel:
-    """The grid update compiled for n_fields velocity fields per node, as particle_to_grid_kernel."""
+    """The grid update compiled for n_fields velocity fields per node, as particle_to_grid_kernels."""
 
     @wp.kernel(module="unique")
     def grid_update(offset: wp.vec3i, substep: Step, cracks: Cracks, grid: GridNodes):
@@ -302,7 +302,7 @@ def on_grid(x: wp.vec3, origin: wp.vec3, dx: float, shape: wp.vec3i, closed_face
 
 
 def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
-    """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernel: (grid_to_particle, of the
+    """G2P compiled for n_fields velocity fields per node, as particle_to_grid_kernels: (grid_to_particle, of the
     particles with mass, ride, of the massless ones); each leaves the others alone, so the particles with mass
     pay nothing for the way the massless ones ride."""
 
