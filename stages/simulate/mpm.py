@@ -441,11 +441,13 @@ def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
     def ride(start: int, substep: Step, cracks: Cracks, grid: GridNodes, particles: Particles, riders: Riders):
         """G2P of the massless particles (Gaussians riding on their body's solid): v_p and C_p are the fit to
         the stencil's nodes with mass (gather_massless) while the particle lies within a cell of its anchor;
-        else, or where no node about it carries mass, its anchor's APIC velocity field at it,
-        v_a + C_a (x_p - x_a), gathered at where the anchor was at this substep's P2G (mark_riders). Beyond a
-        cell its stencil barely holds its anchor's material and may hold another piece's (at a tear) or none
-        (a piece flung away). Without an anchor on the grid: the fit, or its own velocity where no node about
-        it carries mass. It reads no state of another particle that G2P writes: the two run side by side.
+        else, or where no node about it carries mass, it moves rigidly with its anchor, v_p = v_a + W_a
+        (x_p - x_a), W_a the spin (skew part) of the anchor's APIC C_a, gathered where the anchor was at this
+        substep's P2G (mark_riders), and C_p = C_a. Beyond a cell its stencil barely holds its anchor's
+        material and may hold another piece's (at a tear) or none (a piece flung away); the strain part of C_a
+        would carry it on ahead of a spreading front (a sand heap's). Without an anchor on the grid: the fit,
+        or its own velocity where no node about it carries mass. It reads no state of another particle that
+        G2P writes: the two run side by side.
         """
         p = wp.tid() + start
         if particles.free[p] != 0 or particles.mass[p] > 0.0:
@@ -476,7 +478,7 @@ def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
                 anchor_bits = cracks.field_bits[anchor]  # written by P2G (mark_riders), read only here
             anchor_base, anchor_fx = stencil_base(at, grid.origin, 1.0 / dx, grid.shape)
             va, Ca = gather(velocity, anchor_bits, anchor_base, anchor_fx, dx)
-            vp = va + Ca * offset
+            vp = va + (0.5 * (Ca - wp.transpose(Ca))) * offset  # its spin, not its strain
             Cp = Ca
         advect(p, vp, Cp, substep, grid, particles)
 
