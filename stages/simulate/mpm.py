@@ -611,7 +611,11 @@ class MPMSolver:
         self._corners = wp.zeros(6, dtype=wp.int32, device=device)  # stencil_node_box's output
         self._no_corners = np.array([nx, ny, nz, -1, -1, -1], np.int32)  # its start: an empty box
         self._follow_hardening()
-        wp.load_module("stages.simulate", device=device, recursive=True)  # compile before threads race to
+        # compile before threads race to it and before the first substep, whose time the run's estimate
+        # takes for a substep's: the kernels made per field count each live in a module of their own
+        wp.load_module("stages.simulate", device=device, recursive=True)
+        for kernels in (PARTICLE_TO_GRID, MARK_RIDERS, GRID_UPDATE, GRID_TO_PARTICLE, RIDE):
+            wp.load_module(kernels[self.n_fields].module, device=device)
 
     def _parallel(self, launches):
         """Run launch closures concurrently (one per thread on the CPU)."""
