@@ -42,10 +42,10 @@ AXIS_SPACING_SHARE = 0.2
 """Medial axis points nearer than AXIS_SPACING_PX, or this share of its radius, to one with a larger ball
 are dropped (sparse_axis): balls 0.2 r apart leave a surface 0.005 r from their envelope."""
 MAX_CUT = 0.2
-"""A body is cut flat by at most this share of its height to stand on its base (the coffee cup, told a
-35-degree pitch and so standing on the tip of its handle, needed 18 %)..."""
+"""A body is cut flat by at most this share of its height to stand on its base (a cup seen 28 degrees
+shallower than its photograph stands on the tip of its handle and needs 18 %)..."""
 MAX_CUT_VOLUME = 0.03
-"""... and at most this share of its volume (the cup loses 2.6 %; a capsule leaning 20 degrees would
+"""... and at most this share of its volume (that cup loses 2.6 %; a capsule leaning 20 degrees would
 lose 7 %, and is left to fall)."""
 STAND_MARGIN = 0.02
 """A base holds the centre of mass at least this share of size_m inside its edge."""

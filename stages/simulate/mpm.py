@@ -475,7 +475,7 @@ def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
         if follows and weight <= 0.0:
             anchor_bits = int(0)
             if wp.static(n_fields == 2):
-                anchor_bits = cracks.field_bits[anchor]  # written by P2G (mark_riders), read only here
+                anchor_bits = cracks.field_bits[anchor]  # written by particle_to_grid this substep, read only here
             anchor_base, anchor_fx = stencil_base(at, grid.origin, 1.0 / dx, grid.shape)
             va, Ca = gather(velocity, anchor_bits, anchor_base, anchor_fx, dx)
             vp = va + (0.5 * (Ca - wp.transpose(Ca))) * offset  # its spin, not its strain

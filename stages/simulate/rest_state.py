@@ -182,7 +182,7 @@ def warn_dented_by_impact(k: int, material, speed: float) -> None:
     stress = math.sqrt(material.youngs_modulus * material.density) * speed
     if stress <= material.yield_stress:
         return
-    log.warning("object %d (metal, E = %.3g Pa) moves at up to %.2g m/s: meeting the ground at that speed "
+    log.warning("object %d (metal, E = %.3g Pa) is set moving at up to %.2g m/s: meeting the ground at that speed "
                 "stresses it about sqrt(E rho) v = %.3g Pa, above its yield_stress %.3g Pa, so it dents and "
                 "flattens where it lands, as soft metal would. To keep its shape raise "
                 "objects[%d].material.yield_stress above %.3g Pa (a stiffer youngs_modulus raises the impact "

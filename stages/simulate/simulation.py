@@ -237,15 +237,18 @@ class Simulation:
                     "or raise physics.max_substeps_per_frame if you mean it")
         material = self.materials[int(cause.split("[")[1].split("]")[0])]
         # a substep is CFL dx / (wave + other speeds) and the wave grows as sqrt(E): the largest E whose wave
-        # fits the limit's substep beside the same other speeds, with a twentieth to spare
+        # fits the limit's substep beside the same other speeds, with a twentieth to spare; named only where
+        # this material's wave is the one the substep follows and lowering it alone can fit the limit
+        waves = [wave_speed(m, self.solver.stiffening) for m in self.materials]
         wave = wave_speed(material, self.solver.stiffening)
         others = domain.CFL * self.grid.dx / self.substep_size(0.0) - wave
         longest_wave = self.physics.max_substeps_per_frame * self.physics.fps * domain.CFL * self.grid.dx
         fitting_wave = 0.95 * longest_wave - others
-        fitting = material.youngs_modulus * (fitting_wave / wave) ** 2
-        return (f"lower that youngs_modulus to {float(f'{fitting:.1e}'):.1e} Pa or less, or raise its density "
-                "(the elastic wave speed sqrt(E / density) sets the substep), lower physics.grid, or raise "
-                "physics.max_substeps_per_frame if you mean it")
+        lower = "lower that youngs_modulus"
+        if wave >= max(waves) and fitting_wave > 0:
+            lower += f" to {float(f'{material.youngs_modulus * (fitting_wave / wave) ** 2:.1e}'):.1e} Pa or less"
+        return (f"{lower}, or raise its density (the elastic wave speed sqrt(E / density) sets the substep), "
+                "lower physics.grid, or raise physics.max_substeps_per_frame if you mean it")
 
     def _log_bodies(self, rest_sim: np.ndarray) -> None:
         """Each object's mass, volume and principal moments of inertia about its centre of mass; and the
