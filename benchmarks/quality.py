@@ -253,7 +253,7 @@ def _chromaticity(rgb: np.ndarray, alpha: np.ndarray) -> np.ndarray:
 
 
 GRANULAR_COLUMNS = ["scene", "colour shares at frame 0", "in the last frame", "of the particles in front",
-                    "largest share change %", "against the particles in front %", "grain px (spacing)",
+                    "largest share change %", "against the particles in front %", "particle px (spacing)",
                     "sharpness ratio last 1/2 s", "enhanced over coarse"]
 NEW_GRANULAR = ("wheel", "shuttle_sand")
 """Photographs new to the examples (benchmarks/scenes) made of sand, whose workflow results (NAME/gaussians.h5,
@@ -291,7 +291,8 @@ def granular_section(args) -> list[list]:
     heap's pixels nearer each in the last frame, the share of the pixels in front of which lie particles of
     each colour (_shares_in_front: where the heap's surface came from), and the largest relative change of
     the last frame's share from frame 0's and from the particles'; the lattice spacing in pixels at the
-    object's distance (the grain size the render draws); the sharpness ratio over the last half second as
+    object's distance (a particle's size, within which the render draws the material's grains); the sharpness
+    ratio over the last half second as
     in the enhance section (the enhanced frames' variance of the Laplacian inside the object over the
     photograph's), and the enhanced frames' over the coarse render's (what the flow backend keeps of the
     grains the render draws)."""
@@ -465,7 +466,8 @@ SECTIONS = {
                  particles of each photographed colour (pm-render's own particles, shapes and depth order, each
                  drawn in its class: where the heap's visible sand came from), and the largest relative change of
                  the last frame's share from frame 0's and from the particles'; the lattice spacing in pixels at
-                 the object's distance (the size of the grains pm-render draws); the sharpness ratio over the last
+                 the object's distance (a particle's size; pm-render draws 0.5 mm grains within it, decision 0043); the
+                 sharpness ratio over the last
                  half second as in the enhance section, and the enhanced frames' over the coarse render's.""",
                  ["Targets (issue 31): each share within 40 % of its share at frame 0; sharpness ratio at least "
                   "0.6.",
@@ -488,13 +490,12 @@ SECTIONS = {
                   "photograph's Laplacian variance lies in 5 % of its pixels (ink lines, the white band), and the "
                   "wheel's photograph is a smooth gradient. The flow backend keeps the grains pm-render draws "
                   "(enhanced over coarse).",
-                  "Crevices under the grains (interior.crevices, decision 0037), without and with, on the same "
-                  "trajectories (6 frames rendered, coarse over photograph): logo 0.33 -> 0.39, shuttle 14.7 -> "
-                  "14.5, wheel 183 -> 165; shares unchanged (logo 70 % / 30 %, shuttle 66 % / 34 %, wheel 86 % / "
-                  "14 %).",
                   "Each scene (scenes/logo; benchmarks/scenes/wheel, shuttle_sand) run by pm-reconstruct, "
-                  "pm-simulate, pm-render and pm-enhance into --results and --new-results: the logo at ee6312a, "
-                  "the wheel and the shuttle at 4298842 (a scene without thickness_m reconstructs as before).",
+                  "pm-simulate, pm-render and pm-enhance into --results and --new-results: the logo by `make "
+                  "demo` on a clean clone of fe99407; the wheel and the shuttle reconstructed at 4298842 (a scene "
+                  "without thickness_m reconstructs as before), simulated, rendered and enhanced at 2291a3c. "
+                  "Before decision 0043 (grains a lattice spacing across, demo of 776b31b): changes logo 30 %, "
+                  "wheel 8 %, shuttle 22 %; sharpness ratios logo 1.92, wheel 400, shuttle 20.4.",
                   "On tests/render_enhance/test_render_granular.py's log seen end-on (front half orange half "
                   "green, its unseen side green): orange 50 % at frame 0, 15 % of the heap with the colour of "
                   "the nearest surface Gaussian (before decision 0023), 49 % with the rest-ray colour."]),
