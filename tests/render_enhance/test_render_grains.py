@@ -4,33 +4,17 @@ The truth on sand's texture is a photograph of a granular material, scikit-image
 16 px): area-averaged so that a pixel spans k grains, its brightness spreads about its local mean as a flat
 layer of flowing sand drawn where a pixel spans k grains of GRAIN_DIAMETER should. The truth on a pore's
 shade is light bouncing in a sphere cut open by the face, traced path by path."""
-import cv2
 import numpy as np
 import pytest
 import torch
-from skimage import data
 
 import splat
 from stages.render.interior import (FINE_PER_PARTICLE, GRAIN_DIAMETER, LUMA, FineStructure, fine_features,
                                     fine_structure, grain_offsets, grain_shapes, pore_shades, undilated)
+from testing.granular import gravel_texture, texture
 
 FOCAL, SIZE, SPACING = 500.0, 96, 0.005
 """The layer's camera (px) and lattice spacing (m)."""
-
-
-def texture(luma: np.ndarray, margin: int) -> float:
-    """The spread of each pixel's luma (H, W) over its neighbourhood's mean (a Gaussian of 2 px), ``margin`` px
-    from the border left out."""
-    ratio = luma / cv2.GaussianBlur(luma, (0, 0), 2.0, borderType=cv2.BORDER_REFLECT)
-    return float(ratio[margin:-margin, margin:-margin].std())
-
-
-def gravel_texture(grains_a_pixel: float) -> float:
-    """texture of scikit-image's gravel photograph (grains about 16 px) area-averaged so that a pixel spans
-    ``grains_a_pixel`` grains."""
-    gravel = data.gravel().astype(float)
-    n = int(round(gravel.shape[0] / (16 * grains_a_pixel)))
-    return texture(cv2.resize(gravel, (n, n), interpolation=cv2.INTER_AREA), 2)
 
 
 def sand_layer(grains_a_pixel: float) -> tuple[np.ndarray, FineStructure]:

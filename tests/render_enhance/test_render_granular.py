@@ -22,8 +22,8 @@ from stages.enhance.flow import enhance_frames
 from stages.render.interior import EDGE_PX, GRAIN_DIAMETER, grain_offsets, rest_ray_colours
 from stages.render.render import render_camera, render_video, rendered_particles
 from stages.simulate.simulation import Simulation
+from testing.granular import gravel_texture
 
-from .test_render_grains import gravel_texture
 
 SIZE, FOCAL, RADIUS, LENGTH, DISTANCE = 96, 480.0, 0.06, 0.18, 1.0
 ORANGE, GREEN = np.array([0.95, 0.55, 0.15]), np.array([0.45, 0.75, 0.20])
@@ -139,7 +139,7 @@ def test_the_flow_backend_keeps_the_grains(heap):
 def test_the_heap_is_grains_of_sand_not_of_the_lattice(heap):
     """The heap reads as sand, grains finer than its particles: inside each colour's part (alpha > 0.5, 4 px from
     its edges), its brightness spreads about its 2 px mean as scikit-image's gravel photograph's does where a
-    pixel spans as many grains of GRAIN_DIAMETER (test_render_grains.gravel_texture), within a factor 1.5 either
+    pixel spans as many grains of GRAIN_DIAMETER (testing.granular.gravel_texture), within a factor 1.5 either
     way. A heap of lattice-sized grains spreads 2.7 times the gravel's (8 px grains a spacing across, each
     shaded on its own)."""
     _, _, coarse = heap
