@@ -488,6 +488,8 @@ def grid_to_particle_kernels(n_fields: int) -> tuple[wp.Kernel, wp.Kernel]:
 GRID_TO_PARTICLE, RIDE = {}, {}  # per number of fields: G2P of the particles with mass, and of the massless ones
 for _n_fields in (1, 2):
     GRID_TO_PARTICLE[_n_fields], RIDE[_n_fields] = grid_to_particle_kernels(_n_fields)
+PER_FIELD_COUNT = (PARTICLE_TO_GRID, MARK_RIDERS, GRID_UPDATE, GRID_TO_PARTICLE, RIDE)
+"""The kernels made per number of fields, each {n_fields: kernel}; each kernel is a module of its own."""
 
 
 @wp.kernel
@@ -614,7 +616,7 @@ class MPMSolver:
         # compile before threads race to it and before the first substep, whose time the run's estimate
         # takes for a substep's: the kernels made per field count each live in a module of their own
         wp.load_module("stages.simulate", device=device, recursive=True)
-        for kernels in (PARTICLE_TO_GRID, MARK_RIDERS, GRID_UPDATE, GRID_TO_PARTICLE, RIDE):
+        for kernels in PER_FIELD_COUNT:
             wp.load_module(kernels[self.n_fields].module, device=device)
 
     def _parallel(self, launches):

@@ -99,10 +99,10 @@ class Simulation:
         self.gravity_frame = domain.gravity_frame(self.Q)
         moving = [c for c in physics.conditions if c.type in ("impulse", "velocity")]
         speeds = np.array([np.linalg.norm(c.velocity) for c in moving], dtype=np.float64)  # m/s, in any frame
-        self.speed_hint = float(np.max(speeds, initial=0.0))
         # m/s, per object: the fastest its own conditions set it moving
         self._object_speeds = [float(np.max(speeds[[c.object == k for c in moving]], initial=0.0))
                                for k in range(len(self.materials))]
+        self.speed_hint = max(self._object_speeds)
         ground = physics.ground
 
         # the cell size comes from the Gaussians, the one grid is laid over the whole solid they fill

@@ -7,7 +7,6 @@ from testing.cuda_build import compiled_cubins
 
 
 def test_kernels_compile_for_cuda(tmp_path):
-    per_field_count = [kernels[n].module for kernels in (mpm.PARTICLE_TO_GRID, mpm.GRID_UPDATE,
-                                                          mpm.GRID_TO_PARTICLE) for n in (1, 2)]
+    per_field_count = [kernels[n].module for kernels in mpm.PER_FIELD_COUNT for n in (1, 2)]
     modules = [conditions, constitutive, crack_fields, mpm, quasi_static, rigid, *per_field_count]
     assert compiled_cubins(modules, tmp_path) == len(modules)

@@ -12,10 +12,8 @@ from scipy.spatial import cKDTree
 from schemas import materials as M
 from schemas.scene import PhysicsConfig
 from schemas.solid import SolidGrid, gravity_axes
-from stages.simulate import mpm
 from stages.simulate.mpm import GROUND_NONE, Grid, Ground, MPMSolver, anchors
 from stages.simulate.simulation import Simulation
-from testing.cuda_build import compiled_cubins
 from testing.particles import box_surface
 
 G = 9.81
@@ -42,12 +40,6 @@ def pieces(points: np.ndarray, link: float) -> np.ndarray:
     pairs = cKDTree(points).query_pairs(link, output_type="ndarray")
     graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
     return connected_components(graph, directed=False)[1]
-
-
-def test_the_riding_kernels_compile_for_cuda(tmp_path):
-    """mark_riders and ride, each its own module per number of fields, also build for CUDA (sm_90)."""
-    modules = [kernels[n].module for kernels in (mpm.MARK_RIDERS, mpm.RIDE) for n in (1, 2)]
-    assert compiled_cubins(modules, tmp_path) == len(modules)
 
 
 def test_anchors_are_the_nearest_particle_with_mass_of_the_same_object():
